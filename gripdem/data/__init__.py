@@ -1,0 +1,1 @@
+"""Trajectory data: the HDF5 schema, importers, windows, features, graphs, DataModules."""

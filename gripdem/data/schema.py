@@ -1,0 +1,391 @@
+"""The gripdem HDF5 trajectory format: write atomically, read lazily, validate loudly.
+
+Layout of one file (all lengths in metres, times in seconds)::
+
+    /positions   (sims, frames, particles, 3) float64  wrapped into [-l/2, l/2)
+    /times       (sims, frames)               float64  absolute frame times (need not start at 0)
+    /velocities  (sims, frames, particles, 3) float64  optional
+    /radii       (particles,)                 float64  optional, per-particle radii
+    attrs:
+      format = "gripdem", format_version = 1
+      box (3,)                 box lengths (lx, ly, lz); the box is centred at the origin
+      radius                   particle radius (required unless /radii is present)
+      boundary                 "periodic" | "lees_edwards"
+      shear_rate               1/s (0 for periodic)
+      le_sign                  +1: +x image shifted by +delta (u_z = +shear_rate*x); -1: reverse
+      le_time_origin           time at which the LE offset delta is 0
+      body_force_amplitude     a in a_z(x) = a*cos(2*pi*x/lx), m/s^2 (0 if none)
+      provenance               JSON: {"generator": ..., "version": ..., "parameters": {...}}
+
+Every error raised here is a :class:`DatasetError` naming the file, the field and what was
+expected.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from gripdem.boundary import (
+    BOUNDARY_KINDS,
+    RANDOM_CLOSE_PACKING,
+    Boundary,
+    Box,
+    LeesEdwards,
+)
+
+FORMAT_NAME = "gripdem"
+FORMAT_VERSION = 1
+#: relative tolerance on the frame interval for "equidistant" frames
+TIME_RTOL = 1e-4
+#: positions may lie this fraction of the box length outside [-l/2, l/2) (rounding, writers
+#: that wrap to (-l/2, l/2])
+POSITION_RTOL = 1e-6
+
+
+class DatasetError(ValueError):
+    """Bad trajectory data: the message names the file, the field and the expectation."""
+
+    def __init__(self, path: str | os.PathLike | None, field_name: str, message: str):
+        self.path = None if path is None else str(path)
+        self.field = field_name
+        where = "<in memory>" if path is None else str(path)
+        super().__init__(f"{where}: field '{field_name}': {message}")
+
+
+@dataclass
+class TrajectoryData:
+    """Trajectories of one scene held in memory (the unit written and read by this module).
+
+    positions: ``(sims, frames, particles, 3)`` wrapped; times: ``(sims, frames)`` absolute;
+    velocities: optional, same shape as positions; radii: optional ``(particles,)``.
+    """
+
+    positions: np.ndarray
+    times: np.ndarray
+    boundary: Boundary
+    radius: float
+    body_force_amplitude: float = 0.0
+    provenance: dict[str, Any] = field(default_factory=dict)
+    velocities: np.ndarray | None = None
+    radii: np.ndarray | None = None
+
+    @property
+    def box(self) -> Box:
+        return self.boundary.box
+
+    @property
+    def n_sims(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def n_frames(self) -> int:
+        return self.positions.shape[1]
+
+    @property
+    def n_particles(self) -> int:
+        return self.positions.shape[2]
+
+    @property
+    def diameter(self) -> float:
+        return 2.0 * self.radius
+
+    @property
+    def frame_interval(self) -> float:
+        return float(np.mean(np.diff(self.times, axis=1)))
+
+    def offsets(self) -> np.ndarray:
+        """float64 LE offsets of every frame, ``(sims, frames)`` (zeros if periodic)."""
+        return self.boundary.offset(self.times)
+
+
+@dataclass(frozen=True)
+class DatasetMeta:
+    """Everything about a file except the big arrays (what a lazy reader needs)."""
+
+    path: Path
+    n_sims: int
+    n_frames: int
+    n_particles: int
+    boundary: Boundary
+    radius: float
+    frame_interval: float
+    body_force_amplitude: float
+    provenance: dict[str, Any]
+    has_velocities: bool
+
+    @property
+    def box(self) -> Box:
+        return self.boundary.box
+
+    @property
+    def diameter(self) -> float:
+        return 2.0 * self.radius
+
+
+# --------------------------------------------------------------------------------------------
+# validation
+# --------------------------------------------------------------------------------------------
+def _check_array(path, name: str, array: np.ndarray, shape: tuple, what: str) -> None:
+    if array.ndim != len(shape) or any(s is not None and a != s for a, s in zip(array.shape, shape)):
+        raise DatasetError(path, name, f"expected shape {what}, got {tuple(array.shape)}")
+    if not np.issubdtype(array.dtype, np.floating):
+        raise DatasetError(path, name, f"expected a floating-point array, got dtype {array.dtype}")
+
+
+def _check_finite(path, name: str, array: np.ndarray) -> None:
+    bad = ~np.isfinite(array)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise DatasetError(
+            path, name, f"expected finite values, found {int(bad.sum())} NaN/Inf (first at {first})"
+        )
+
+
+def validate_times(path, times: np.ndarray) -> float:
+    """Check ``(sims, frames)`` times: finite, strictly increasing, equidistant, one interval
+    shared by all simulations. Returns the frame interval."""
+    _check_finite(path, "times", times)
+    if times.shape[1] < 2:
+        raise DatasetError(path, "times", f"expected at least 2 frames, got {times.shape[1]}")
+    steps = np.diff(times, axis=1)
+    if not (steps > 0).all():
+        s, f = (int(i) for i in np.argwhere(steps <= 0)[0])
+        raise DatasetError(
+            path, "times", f"expected strictly increasing frame times; simulation {s} has "
+            f"t[{f + 1}] = {times[s, f + 1]!r} <= t[{f}] = {times[s, f]!r}"
+        )
+    interval = float(np.median(steps))
+    worst = float(np.max(np.abs(steps - interval)))
+    if worst > TIME_RTOL * interval:
+        s, f = (int(i) for i in np.unravel_index(np.argmax(np.abs(steps - interval)), steps.shape))
+        raise DatasetError(
+            path, "times", f"expected equidistant frames (relative tolerance {TIME_RTOL:g}); "
+            f"simulation {s} has interval {steps[s, f]!r} between frames {f} and {f + 1}, "
+            f"median interval {interval!r}"
+        )
+    return interval
+
+
+def validate_positions(path, positions: np.ndarray, box: Box, sim_index: int | None = None) -> None:
+    """Finite and inside ``[-l/2, l/2)`` within ``POSITION_RTOL`` per axis."""
+    _check_finite(path, "positions", positions)
+    for axis, length in enumerate(box.lengths):
+        coords = positions[..., axis]
+        tol = POSITION_RTOL * length
+        lo, hi = float(coords.min()), float(coords.max())
+        if lo < -0.5 * length - tol or hi > 0.5 * length + tol:
+            where = "" if sim_index is None else f" (simulation {sim_index})"
+            raise DatasetError(
+                path, "positions", f"expected wrapped coordinates in [-l/2, l/2) = "
+                f"[{-0.5 * length:g}, {0.5 * length:g}) on axis {'xyz'[axis]}{where}, found "
+                f"values in [{lo:g}, {hi:g}]; wrap them with gripdem.boundary.wrap_positions"
+            )
+
+
+def validate(data: TrajectoryData, path=None) -> float:
+    """Check an in-memory dataset; returns the frame interval. Raises :class:`DatasetError`."""
+    pos = np.asarray(data.positions)
+    _check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
+    s, f, n, _ = pos.shape
+    if min(s, f, n) == 0:
+        raise DatasetError(path, "positions", f"expected non-empty sims/frames/particles, got {pos.shape}")
+    times = np.asarray(data.times)
+    _check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
+    if data.velocities is not None:
+        vel = np.asarray(data.velocities)
+        _check_array(path, "velocities", vel, pos.shape, f"{pos.shape} like positions")
+        _check_finite(path, "velocities", vel)
+    interval = validate_times(path, times)
+    _check_radius(path, data.radius, data.radii, n)
+    _check_volume_fraction(path, data.boundary.box, n, data.radius, data.radii)
+    for sim in range(s):
+        validate_positions(path, pos[sim], data.boundary.box, sim)
+    if not np.isfinite(data.body_force_amplitude):
+        raise DatasetError(path, "body_force_amplitude", "expected a finite number")
+    return interval
+
+
+def _check_radius(path, radius: float, radii: np.ndarray | None, n: int) -> None:
+    if radii is not None:
+        radii = np.asarray(radii)
+        _check_array(path, "radii", radii, (n,), f"(particles,) = ({n},)")
+        _check_finite(path, "radii", radii)
+        if not (radii > 0).all():
+            raise DatasetError(path, "radii", "expected positive radii")
+    if not (np.isfinite(radius) and radius > 0):
+        raise DatasetError(path, "radius", f"expected a positive particle radius in metres, got {radius!r}")
+
+
+def _check_volume_fraction(path, box: Box, n: int, radius: float, radii) -> None:
+    volume = (4.0 / 3.0) * np.pi * (np.sum(np.asarray(radii) ** 3) if radii is not None else n * radius**3)
+    phi = volume / box.volume
+    if phi > RANDOM_CLOSE_PACKING:
+        raise DatasetError(
+            path, "radius" if radii is None else "radii",
+            f"expected a volume fraction below random close packing ({RANDOM_CLOSE_PACKING}); "
+            f"{n} particles of radius {radius:g} in a box of {box.lx:g} x {box.ly:g} x "
+            f"{box.lz:g} give {phi:.3g} (is a diameter stored as the radius?)",
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------------
+def write_dataset(path: str | os.PathLike, data: TrajectoryData, overwrite: bool = False) -> Path:
+    """Validate and write ``data`` atomically (temporary file in the same folder, then rename).
+
+    Refuses to replace an existing file unless ``overwrite=True``. On any error nothing is
+    left behind and an existing file is untouched.
+    """
+    path = Path(path)
+    validate(data, path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: exists; refusing to overwrite it (pass overwrite=True)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    try:
+        with h5py.File(tmp, "w") as h5:
+            h5.create_dataset("positions", data=np.asarray(data.positions, dtype=np.float64),
+                              chunks=(1, 1, data.n_particles, 3))
+            h5.create_dataset("times", data=np.asarray(data.times, dtype=np.float64))
+            if data.velocities is not None:
+                h5.create_dataset("velocities", data=np.asarray(data.velocities, dtype=np.float64),
+                                  chunks=(1, 1, data.n_particles, 3))
+            if data.radii is not None:
+                h5.create_dataset("radii", data=np.asarray(data.radii, dtype=np.float64))
+            attrs = h5.attrs
+            attrs["format"] = FORMAT_NAME
+            attrs["format_version"] = FORMAT_VERSION
+            for key, value in data.boundary.to_attrs().items():
+                attrs[key] = value
+            attrs["radius"] = float(data.radius)
+            attrs["body_force_amplitude"] = float(data.body_force_amplitude)
+            attrs["provenance"] = json.dumps(data.provenance, sort_keys=True, default=str)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------
+def _attr(path, h5: h5py.File, name: str, default: Any = ...) -> Any:
+    if name not in h5.attrs:
+        if default is ...:
+            raise DatasetError(path, name, "missing attribute")
+        return default
+    value = h5.attrs[name]
+    if isinstance(value, bytes):
+        value = value.decode()
+    return value
+
+
+def _float_attr(path, h5, name: str, default: Any = ...) -> float:
+    value = _attr(path, h5, name, default)
+    try:
+        return float(np.asarray(value).reshape(()))
+    except (TypeError, ValueError):
+        raise DatasetError(path, name, f"expected a number, got {value!r}") from None
+
+
+def _boundary_from_attrs(path, h5: h5py.File) -> Boundary:
+    box_attr = np.asarray(_attr(path, h5, "box"), dtype=np.float64)
+    if box_attr.shape != (3,) or not np.isfinite(box_attr).all() or not (box_attr > 0).all():
+        raise DatasetError(path, "box", f"expected 3 positive lengths (lx, ly, lz), got {box_attr!r}")
+    box = Box.from_lengths(box_attr)
+    kind = str(_attr(path, h5, "boundary"))
+    if kind not in BOUNDARY_KINDS:
+        raise DatasetError(path, "boundary", f"expected one of {BOUNDARY_KINDS}, got {kind!r}")
+    if kind == "periodic":
+        return Boundary(box)
+    shear_rate = _float_attr(path, h5, "shear_rate")
+    if not (np.isfinite(shear_rate) and shear_rate > 0):
+        raise DatasetError(path, "shear_rate", f"expected a positive shear rate (1/s) for "
+                           f"lees_edwards data, got {shear_rate!r}")
+    sign = int(_float_attr(path, h5, "le_sign"))
+    if sign not in (1, -1):
+        raise DatasetError(path, "le_sign", f"expected +1 or -1, got {sign!r}")
+    origin = _float_attr(path, h5, "le_time_origin")
+    return Boundary(box, LeesEdwards(shear_rate, sign, origin))
+
+
+def read_meta(path: str | os.PathLike, h5: h5py.File | None = None) -> DatasetMeta:
+    """Read and check attributes, shapes and dtypes, and the times (cheap: no positions)."""
+    path = Path(path)
+    if h5 is None:
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such dataset file")
+        try:
+            with h5py.File(path, "r") as handle:
+                return read_meta(path, handle)
+        except OSError as exc:
+            raise DatasetError(path, "<file>", f"expected an HDF5 file ({exc})") from None
+    fmt = _attr(path, h5, "format", None)
+    if fmt is not None and fmt != FORMAT_NAME:
+        raise DatasetError(path, "format", f"expected {FORMAT_NAME!r}, got {fmt!r}")
+    for name in ("positions", "times"):
+        if name not in h5:
+            raise DatasetError(path, name, "missing dataset")
+    pos = h5["positions"]
+    _check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
+    if pos.dtype != np.float64:
+        raise DatasetError(path, "positions", f"expected float64, got {pos.dtype}")
+    s, f, n, _ = pos.shape
+    times = h5["times"]
+    _check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
+    interval = validate_times(path, np.asarray(times[()], dtype=np.float64))
+    has_vel = "velocities" in h5
+    if has_vel:
+        _check_array(path, "velocities", h5["velocities"], pos.shape, f"{pos.shape} like positions")
+    radii = np.asarray(h5["radii"][()]) if "radii" in h5 else None
+    if radii is not None:
+        _check_radius(path, float(np.mean(radii)), radii, n)
+        radius = _float_attr(path, h5, "radius", float(np.mean(radii)))
+    else:
+        radius = _float_attr(path, h5, "radius")
+        _check_radius(path, radius, None, n)
+    boundary = _boundary_from_attrs(path, h5)
+    _check_volume_fraction(path, boundary.box, n, radius, radii)
+    provenance_raw = _attr(path, h5, "provenance", "{}")
+    try:
+        provenance = json.loads(provenance_raw)
+    except json.JSONDecodeError:
+        raise DatasetError(path, "provenance", "expected a JSON string") from None
+    return DatasetMeta(
+        path=path, n_sims=s, n_frames=f, n_particles=n, boundary=boundary, radius=radius,
+        frame_interval=interval,
+        body_force_amplitude=_float_attr(path, h5, "body_force_amplitude", 0.0),
+        provenance=provenance, has_velocities=has_vel,
+    )
+
+
+def read_dataset(path: str | os.PathLike, validate_positions_: bool = True) -> TrajectoryData:
+    """Read a whole file into memory, validating everything (positions one simulation at a
+    time, so the check itself needs no more memory than the result)."""
+    path = Path(path)
+    meta = read_meta(path)
+    with h5py.File(path, "r") as h5:
+        positions = np.asarray(h5["positions"][()], dtype=np.float64)
+        times = np.asarray(h5["times"][()], dtype=np.float64)
+        velocities = np.asarray(h5["velocities"][()]) if meta.has_velocities else None
+        radii = np.asarray(h5["radii"][()]) if "radii" in h5 else None
+    if validate_positions_:
+        for sim in range(meta.n_sims):
+            validate_positions(path, positions[sim], meta.box, sim)
+    if velocities is not None:
+        _check_finite(path, "velocities", velocities)
+    return TrajectoryData(
+        positions=positions, times=times, boundary=meta.boundary, radius=meta.radius,
+        body_force_amplitude=meta.body_force_amplitude, provenance=meta.provenance,
+        velocities=velocities, radii=radii,
+    )

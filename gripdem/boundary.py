@@ -195,7 +195,10 @@ class Boundary:
 
     def describe(self) -> str:
         return json.dumps(
-            {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.to_attrs().items()}
+            {
+                k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                for k, v in self.to_attrs().items()
+            }
         )
 
 
@@ -311,7 +314,7 @@ def unwrap_trajectory(
 
 
 def rewrap_trajectory(continuous: Array, box: Box, offsets: Array | None = None) -> Array:
-    """Inverse of :func:`unwrap_trajectory`: wrap frame t with its own offset. ``(frames,...,3)``."""
+    """Inverse of :func:`unwrap_trajectory`: wrap frame t with its own offset."""
     if offsets is None:
         return wrap_positions(continuous, box)
     extra = continuous.ndim - 2
@@ -375,7 +378,9 @@ def check_finite(values: Array, what: str) -> None:
     bad = ~torch.isfinite(values) if _is_torch(values) else ~np.isfinite(values)
     if bad.any():
         count = int(bad.sum())
-        first = tuple(int(i) for i in (torch.nonzero(bad)[0] if _is_torch(values) else np.argwhere(bad)[0]))
+        first = tuple(
+            int(i) for i in (torch.nonzero(bad)[0] if _is_torch(values) else np.argwhere(bad)[0])
+        )
         raise FloatingPointError(
             f"{what}: {count} non-finite value(s) (NaN or Inf), first at index {first}"
         )

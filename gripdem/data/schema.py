@@ -134,7 +134,9 @@ class DatasetMeta:
 # validation
 # --------------------------------------------------------------------------------------------
 def _check_array(path, name: str, array: np.ndarray, shape: tuple, what: str) -> None:
-    if array.ndim != len(shape) or any(s is not None and a != s for a, s in zip(array.shape, shape)):
+    if array.ndim != len(shape) or any(
+        s is not None and a != s for a, s in zip(array.shape, shape, strict=True)
+    ):
         raise DatasetError(path, name, f"expected shape {what}, got {tuple(array.shape)}")
     if not np.issubdtype(array.dtype, np.floating):
         raise DatasetError(path, name, f"expected a floating-point array, got dtype {array.dtype}")
@@ -159,17 +161,21 @@ def validate_times(path, times: np.ndarray) -> float:
     if not (steps > 0).all():
         s, f = (int(i) for i in np.argwhere(steps <= 0)[0])
         raise DatasetError(
-            path, "times", f"expected strictly increasing frame times; simulation {s} has "
-            f"t[{f + 1}] = {times[s, f + 1]!r} <= t[{f}] = {times[s, f]!r}"
+            path,
+            "times",
+            f"expected strictly increasing frame times; simulation {s} has "
+            f"t[{f + 1}] = {times[s, f + 1]!r} <= t[{f}] = {times[s, f]!r}",
         )
     interval = float(np.median(steps))
     worst = float(np.max(np.abs(steps - interval)))
     if worst > TIME_RTOL * interval:
         s, f = (int(i) for i in np.unravel_index(np.argmax(np.abs(steps - interval)), steps.shape))
         raise DatasetError(
-            path, "times", f"expected equidistant frames (relative tolerance {TIME_RTOL:g}); "
+            path,
+            "times",
+            f"expected equidistant frames (relative tolerance {TIME_RTOL:g}); "
             f"simulation {s} has interval {steps[s, f]!r} between frames {f} and {f + 1}, "
-            f"median interval {interval!r}"
+            f"median interval {interval!r}",
         )
     return interval
 
@@ -184,9 +190,11 @@ def validate_positions(path, positions: np.ndarray, box: Box, sim_index: int | N
         if lo < -0.5 * length - tol or hi > 0.5 * length + tol:
             where = "" if sim_index is None else f" (simulation {sim_index})"
             raise DatasetError(
-                path, "positions", f"expected wrapped coordinates in [-l/2, l/2) = "
+                path,
+                "positions",
+                f"expected wrapped coordinates in [-l/2, l/2) = "
                 f"[{-0.5 * length:g}, {0.5 * length:g}) on axis {'xyz'[axis]}{where}, found "
-                f"values in [{lo:g}, {hi:g}]; wrap them with gripdem.boundary.wrap_positions"
+                f"values in [{lo:g}, {hi:g}]; wrap them with gripdem.boundary.wrap_positions",
             )
 
 
@@ -196,7 +204,9 @@ def validate(data: TrajectoryData, path=None) -> float:
     _check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
     s, f, n, _ = pos.shape
     if min(s, f, n) == 0:
-        raise DatasetError(path, "positions", f"expected non-empty sims/frames/particles, got {pos.shape}")
+        raise DatasetError(
+            path, "positions", f"expected non-empty sims/frames/particles, got {pos.shape}"
+        )
     times = np.asarray(data.times)
     _check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
     if data.velocities is not None:
@@ -221,15 +231,22 @@ def _check_radius(path, radius: float, radii: np.ndarray | None, n: int) -> None
         if not (radii > 0).all():
             raise DatasetError(path, "radii", "expected positive radii")
     if not (np.isfinite(radius) and radius > 0):
-        raise DatasetError(path, "radius", f"expected a positive particle radius in metres, got {radius!r}")
+        raise DatasetError(
+            path, "radius", f"expected a positive particle radius in metres, got {radius!r}"
+        )
 
 
 def _check_volume_fraction(path, box: Box, n: int, radius: float, radii) -> None:
-    volume = (4.0 / 3.0) * np.pi * (np.sum(np.asarray(radii) ** 3) if radii is not None else n * radius**3)
+    volume = (
+        (4.0 / 3.0)
+        * np.pi
+        * (np.sum(np.asarray(radii) ** 3) if radii is not None else n * radius**3)
+    )
     phi = volume / box.volume
     if phi > RANDOM_CLOSE_PACKING:
         raise DatasetError(
-            path, "radius" if radii is None else "radii",
+            path,
+            "radius" if radii is None else "radii",
             f"expected a volume fraction below random close packing ({RANDOM_CLOSE_PACKING}); "
             f"{n} particles of radius {radius:g} in a box of {box.lx:g} x {box.ly:g} x "
             f"{box.lz:g} give {phi:.3g} (is a diameter stored as the radius?)",
@@ -253,12 +270,18 @@ def write_dataset(path: str | os.PathLike, data: TrajectoryData, overwrite: bool
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     try:
         with h5py.File(tmp, "w") as h5:
-            h5.create_dataset("positions", data=np.asarray(data.positions, dtype=np.float64),
-                              chunks=(1, 1, data.n_particles, 3))
+            h5.create_dataset(
+                "positions",
+                data=np.asarray(data.positions, dtype=np.float64),
+                chunks=(1, 1, data.n_particles, 3),
+            )
             h5.create_dataset("times", data=np.asarray(data.times, dtype=np.float64))
             if data.velocities is not None:
-                h5.create_dataset("velocities", data=np.asarray(data.velocities, dtype=np.float64),
-                                  chunks=(1, 1, data.n_particles, 3))
+                h5.create_dataset(
+                    "velocities",
+                    data=np.asarray(data.velocities, dtype=np.float64),
+                    chunks=(1, 1, data.n_particles, 3),
+                )
             if data.radii is not None:
                 h5.create_dataset("radii", data=np.asarray(data.radii, dtype=np.float64))
             attrs = h5.attrs
@@ -301,7 +324,9 @@ def _float_attr(path, h5, name: str, default: Any = ...) -> float:
 def _boundary_from_attrs(path, h5: h5py.File) -> Boundary:
     box_attr = np.asarray(_attr(path, h5, "box"), dtype=np.float64)
     if box_attr.shape != (3,) or not np.isfinite(box_attr).all() or not (box_attr > 0).all():
-        raise DatasetError(path, "box", f"expected 3 positive lengths (lx, ly, lz), got {box_attr!r}")
+        raise DatasetError(
+            path, "box", f"expected 3 positive lengths (lx, ly, lz), got {box_attr!r}"
+        )
     box = Box.from_lengths(box_attr)
     kind = str(_attr(path, h5, "boundary"))
     if kind not in BOUNDARY_KINDS:
@@ -310,8 +335,11 @@ def _boundary_from_attrs(path, h5: h5py.File) -> Boundary:
         return Boundary(box)
     shear_rate = _float_attr(path, h5, "shear_rate")
     if not (np.isfinite(shear_rate) and shear_rate > 0):
-        raise DatasetError(path, "shear_rate", f"expected a positive shear rate (1/s) for "
-                           f"lees_edwards data, got {shear_rate!r}")
+        raise DatasetError(
+            path,
+            "shear_rate",
+            f"expected a positive shear rate (1/s) for lees_edwards data, got {shear_rate!r}",
+        )
     sign = int(_float_attr(path, h5, "le_sign"))
     if sign not in (1, -1):
         raise DatasetError(path, "le_sign", f"expected +1 or -1, got {sign!r}")
@@ -362,10 +390,16 @@ def read_meta(path: str | os.PathLike, h5: h5py.File | None = None) -> DatasetMe
     except json.JSONDecodeError:
         raise DatasetError(path, "provenance", "expected a JSON string") from None
     return DatasetMeta(
-        path=path, n_sims=s, n_frames=f, n_particles=n, boundary=boundary, radius=radius,
+        path=path,
+        n_sims=s,
+        n_frames=f,
+        n_particles=n,
+        boundary=boundary,
+        radius=radius,
         frame_interval=interval,
         body_force_amplitude=_float_attr(path, h5, "body_force_amplitude", 0.0),
-        provenance=provenance, has_velocities=has_vel,
+        provenance=provenance,
+        has_velocities=has_vel,
     )
 
 
@@ -385,7 +419,12 @@ def read_dataset(path: str | os.PathLike, validate_positions_: bool = True) -> T
     if velocities is not None:
         _check_finite(path, "velocities", velocities)
     return TrajectoryData(
-        positions=positions, times=times, boundary=meta.boundary, radius=meta.radius,
-        body_force_amplitude=meta.body_force_amplitude, provenance=meta.provenance,
-        velocities=velocities, radii=radii,
+        positions=positions,
+        times=times,
+        boundary=meta.boundary,
+        radius=meta.radius,
+        body_force_amplitude=meta.body_force_amplitude,
+        provenance=meta.provenance,
+        velocities=velocities,
+        radii=radii,
     )

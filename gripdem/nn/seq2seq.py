@@ -1,0 +1,118 @@
+"""Trajectory block of GRIP++: ``n_heads`` seq2seq GRU networks whose outputs are averaged.
+
+Each network encodes the graph features of every particle over the observed time with a
+fused multi-layer GRU, then decodes ``horizon`` steps autoregressively. The decoder carries a
+*state* (what it is fed: a velocity for ``grip``, a position for ``pct``/``vct``) and emits
+an *output* per step; the state advances by a fixed linear map of the output::
+
+    output_k = head(GRU(state_{k-1}, h)) + base          (base: see ``residual_base``)
+    state_k  = state_{k-1} + output_k @ fold              (fold: identity, or 8 -> 6 for vct)
+
+``grip``: state = velocity, emitted = the new velocity (residual on the input velocity).
+``pct``: state = position, emitted = the per-step position delta.
+``vct``: state = position (6 sin/cos channels), emitted = the 8 channel delta (real + shift),
+and ``fold`` adds the two shift channels onto the z channels.
+The output head starts at zero, so an untrained decoder reproduces its base: the last
+velocity for ``grip`` (constant velocity along a chord in feature space), and for ``pct`` /
+``vct`` a zero delta (stay) or the last observed delta (constant velocity) by config.
+All work is batched over particles: no Python loop per particle, one loop over the horizon.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+class Seq2SeqGRU(nn.Module):
+    """One encoder-decoder GRU network.
+
+    forward(features, state, base, horizon, fold):
+      features ``(nodes, time, channels)``, state ``(nodes, state_channels)``,
+      base ``(nodes, out_channels)`` or None, fold ``(out_channels, state_channels)``
+      -> outputs ``(nodes, horizon, out_channels)``.
+    """
+
+    def __init__(
+        self,
+        in_channels: int,
+        state_channels: int,
+        out_channels: int,
+        hidden: int = 350,
+        layers: int = 2,
+        dropout: float = 0.0,
+    ):
+        super().__init__()
+        self.encoder = nn.GRU(in_channels, hidden, layers, batch_first=True, dropout=dropout)
+        self.decoder = nn.GRU(state_channels, hidden, layers, batch_first=True, dropout=dropout)
+        self.head = nn.Linear(hidden, out_channels)
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(
+        self,
+        features: torch.Tensor,
+        state: torch.Tensor,
+        base: torch.Tensor | None,
+        horizon: int,
+        fold: torch.Tensor,
+    ) -> torch.Tensor:
+        _, hidden = self.encoder(features)
+        outputs = []
+        for _ in range(horizon):
+            step, hidden = self.decoder(state.unsqueeze(1), hidden)
+            out = self.head(step.squeeze(1))
+            if base is not None:
+                out = out + base
+            outputs.append(out)
+            state = state + out @ fold
+        return torch.stack(outputs, dim=1)
+
+
+class TrajectoryDecoder(nn.Module):
+    """``n_heads`` seq2seq networks, outputs averaged (SPEC §5).
+
+    forward(features ``(batch, particles, time, channels)``, state ``(batch, particles, S)``,
+    base ``(batch, particles, O)`` or None, horizon) -> ``(batch, particles, horizon, O)``.
+    """
+
+    def __init__(
+        self,
+        in_channels: int,
+        state_channels: int,
+        out_channels: int,
+        hidden: int = 350,
+        layers: int = 2,
+        n_heads: int = 2,
+        dropout: float = 0.0,
+        fold: torch.Tensor | None = None,
+    ):
+        super().__init__()
+        if fold is None:
+            if state_channels != out_channels:
+                raise ValueError("a fold matrix is needed when state and output channels differ")
+            fold = torch.eye(out_channels)
+        if tuple(fold.shape) != (out_channels, state_channels):
+            raise ValueError(
+                f"fold must be ({out_channels}, {state_channels}), got {tuple(fold.shape)}"
+            )
+        self.register_buffer("fold", fold.float())
+        self.heads = nn.ModuleList(
+            Seq2SeqGRU(in_channels, state_channels, out_channels, hidden, layers, dropout)
+            for _ in range(n_heads)
+        )
+
+    def forward(
+        self,
+        features: torch.Tensor,
+        state: torch.Tensor,
+        base: torch.Tensor | None,
+        horizon: int,
+    ) -> torch.Tensor:
+        b, n, t, c = features.shape
+        flat = features.reshape(b * n, t, c)
+        flat_state = state.reshape(b * n, -1)
+        flat_base = None if base is None else base.reshape(b * n, -1)
+        fold = self.fold.to(features.dtype)
+        outputs = [head(flat, flat_state, flat_base, horizon, fold) for head in self.heads]
+        return torch.stack(outputs, 0).mean(0).reshape(b, n, horizon, -1)

@@ -5,13 +5,15 @@ fused multi-layer GRU, then decodes ``horizon`` steps autoregressively. The deco
 *state* (what it is fed: a velocity for ``grip``, a position for ``pct``/``vct``) and emits
 an *output* per step; the state advances by a fixed linear map of the output::
 
-    output_k = head(GRU(state_{k-1}, h)) + base          (base: see ``residual_base``)
-    state_k  = state_{k-1} + output_k @ fold              (fold: identity, or 8 -> 6 for vct)
+    output_k = head(GRU(state_{k-1}, h)) + base        (base: None, or a constant per node)
+    state_k  = state_{k-1} + output_k @ fold + shift    (an affine map: de-normalise, fold)
 
-``grip``: state = velocity, emitted = the new velocity (residual on the input velocity).
-``pct``: state = position, emitted = the per-step position delta.
-``vct``: state = position (6 sin/cos channels), emitted = the 8 channel delta (real + shift),
-and ``fold`` adds the two shift channels onto the z channels.
+``grip``: state = (normalised) velocity, output = the change of velocity (residual on the
+input velocity), fold = identity.
+``pct``: state = position features, output = the normalised per-step position delta; fold and
+shift de-normalise it.
+``vct``: state = position features (6 sin/cos channels), output = the normalised 8 channel
+delta (real + shift); fold de-normalises and adds the two shift channels onto the z channels.
 The output head starts at zero, so an untrained decoder reproduces its base: the last
 velocity for ``grip`` (constant velocity along a chord in feature space), and for ``pct`` /
 ``vct`` a zero delta (stay) or the last observed delta (constant velocity) by config.
@@ -27,10 +29,10 @@ from torch import nn
 class Seq2SeqGRU(nn.Module):
     """One encoder-decoder GRU network.
 
-    forward(features, state, base, horizon, fold):
+    forward(features, state, base, horizon, fold, shift):
       features ``(nodes, time, channels)``, state ``(nodes, state_channels)``,
-      base ``(nodes, out_channels)`` or None, fold ``(out_channels, state_channels)``
-      -> outputs ``(nodes, horizon, out_channels)``.
+      base ``(nodes, out_channels)`` or None, fold ``(out_channels, state_channels)``,
+      shift ``(state_channels,)`` -> outputs ``(nodes, horizon, out_channels)``.
     """
 
     def __init__(
@@ -56,6 +58,7 @@ class Seq2SeqGRU(nn.Module):
         base: torch.Tensor | None,
         horizon: int,
         fold: torch.Tensor,
+        shift: torch.Tensor,
     ) -> torch.Tensor:
         _, hidden = self.encoder(features)
         outputs = []
@@ -65,7 +68,7 @@ class Seq2SeqGRU(nn.Module):
             if base is not None:
                 out = out + base
             outputs.append(out)
-            state = state + out @ fold
+            state = state + out @ fold + shift
         return torch.stack(outputs, dim=1)
 
 
@@ -86,6 +89,7 @@ class TrajectoryDecoder(nn.Module):
         n_heads: int = 2,
         dropout: float = 0.0,
         fold: torch.Tensor | None = None,
+        shift: torch.Tensor | None = None,
     ):
         super().__init__()
         if fold is None:
@@ -96,7 +100,12 @@ class TrajectoryDecoder(nn.Module):
             raise ValueError(
                 f"fold must be ({out_channels}, {state_channels}), got {tuple(fold.shape)}"
             )
+        if shift is None:
+            shift = torch.zeros(state_channels)
+        if tuple(shift.shape) != (state_channels,):
+            raise ValueError(f"shift must be ({state_channels},), got {tuple(shift.shape)}")
         self.register_buffer("fold", fold.float())
+        self.register_buffer("shift", shift.float())
         self.heads = nn.ModuleList(
             Seq2SeqGRU(in_channels, state_channels, out_channels, hidden, layers, dropout)
             for _ in range(n_heads)
@@ -113,6 +122,6 @@ class TrajectoryDecoder(nn.Module):
         flat = features.reshape(b * n, t, c)
         flat_state = state.reshape(b * n, -1)
         flat_base = None if base is None else base.reshape(b * n, -1)
-        fold = self.fold.to(features.dtype)
-        outputs = [head(flat, flat_state, flat_base, horizon, fold) for head in self.heads]
+        fold, shift = self.fold.to(features.dtype), self.shift.to(features.dtype)
+        outputs = [head(flat, flat_state, flat_base, horizon, fold, shift) for head in self.heads]
         return torch.stack(outputs, 0).mean(0).reshape(b, n, horizon, -1)

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import os
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ from gripdem.boundary import (
     Box,
     LeesEdwards,
 )
+from gripdem.data.h5io import atomic_h5_write
 
 FORMAT_NAME = "gripdem"
 FORMAT_VERSION = 1
@@ -264,38 +264,29 @@ def write_dataset(path: str | os.PathLike, data: TrajectoryData, overwrite: bool
     """
     path = Path(path)
     validate(data, path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: exists; refusing to overwrite it (pass overwrite=True)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    try:
-        with h5py.File(tmp, "w") as h5:
+    with atomic_h5_write(path, overwrite) as h5:
+        h5.create_dataset(
+            "positions",
+            data=np.asarray(data.positions, dtype=np.float64),
+            chunks=(1, 1, data.n_particles, 3),
+        )
+        h5.create_dataset("times", data=np.asarray(data.times, dtype=np.float64))
+        if data.velocities is not None:
             h5.create_dataset(
-                "positions",
-                data=np.asarray(data.positions, dtype=np.float64),
+                "velocities",
+                data=np.asarray(data.velocities, dtype=np.float64),
                 chunks=(1, 1, data.n_particles, 3),
             )
-            h5.create_dataset("times", data=np.asarray(data.times, dtype=np.float64))
-            if data.velocities is not None:
-                h5.create_dataset(
-                    "velocities",
-                    data=np.asarray(data.velocities, dtype=np.float64),
-                    chunks=(1, 1, data.n_particles, 3),
-                )
-            if data.radii is not None:
-                h5.create_dataset("radii", data=np.asarray(data.radii, dtype=np.float64))
-            attrs = h5.attrs
-            attrs["format"] = FORMAT_NAME
-            attrs["format_version"] = FORMAT_VERSION
-            for key, value in data.boundary.to_attrs().items():
-                attrs[key] = value
-            attrs["radius"] = float(data.radius)
-            attrs["body_force_amplitude"] = float(data.body_force_amplitude)
-            attrs["provenance"] = json.dumps(data.provenance, sort_keys=True, default=str)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        if data.radii is not None:
+            h5.create_dataset("radii", data=np.asarray(data.radii, dtype=np.float64))
+        attrs = h5.attrs
+        attrs["format"] = FORMAT_NAME
+        attrs["format_version"] = FORMAT_VERSION
+        for key, value in data.boundary.to_attrs().items():
+            attrs[key] = value
+        attrs["radius"] = float(data.radius)
+        attrs["body_force_amplitude"] = float(data.body_force_amplitude)
+        attrs["provenance"] = json.dumps(data.provenance, sort_keys=True, default=str)
     return path
 
 

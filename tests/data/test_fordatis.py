@@ -1,0 +1,470 @@
+"""Importer of the authors' Fordatis format, on archives written here in their layout.
+
+Each file holds one group ``Step#k`` per frame with attrs Time/Lower/Upper and datasets
+Identifier/Coords_0..2, particles shuffled in every frame. Lees-Edwards trajectories are
+integrated in continuous coordinates under ``u_z = sign*shear_rate*x`` plus small random motion
+and wrapped frame by frame with the offset of their own sign convention (the authors' is -1).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from gripdem.boundary import Box, LeesEdwards, wrap_coordinate, wrap_positions
+from gripdem.convert import main
+from gripdem.data.fordatis import DEFAULT_DIAMETER, read_fordatis
+from gripdem.data.schema import DatasetError, read_dataset
+
+BOX = Box(3.2e-5, 2.8e-5, 3.6e-5)  # not cubic on purpose
+D = DEFAULT_DIAMETER
+SHEAR = 1000.0
+DT = 5e-6
+T_START = 1.1e-3  # absolute frame times, as in the authors' data
+
+
+# --------------------------------------------------------------------------------------------
+# writing the authors' layout
+# --------------------------------------------------------------------------------------------
+def make_trajectory(
+    seed, n=80, frames=40, sign=None, time_origin=0.0, t_start=T_START, x_band=None, vx=0.02
+):
+    """Wrapped positions ``(frames, n, 3)`` (centred box), times ``(frames,)``, identifiers.
+
+    sign=None: periodic. Particle i has identifier ids[i]; x moves at a constant velocity (up
+    to ``vx*lx`` per frame, so particles cross the x faces) plus noise.
+    """
+    rng = np.random.default_rng(seed)
+    times = t_start + DT * np.arange(frames)
+    cont = np.empty((frames, n, 3))
+    cont[0] = (rng.random((n, 3)) - 0.5) * BOX.lengths
+    if x_band is not None:
+        cont[0, :, 0] *= x_band
+    step = np.zeros((n, 3))
+    step[:, 0] = rng.uniform(-vx, vx, n) * BOX.lx
+    for f in range(1, frames):
+        noise = rng.normal(0.0, 2e-3 * D, (n, 3))
+        flow = 0.0 if sign is None else sign * SHEAR * cont[f - 1, :, 0] * DT
+        cont[f] = cont[f - 1] + step + noise
+        cont[f, :, 2] += flow
+    if sign is None:
+        wrapped = wrap_positions(cont, BOX)
+    else:
+        offsets = LeesEdwards(SHEAR, sign, time_origin).offset(BOX, times)
+        wrapped = wrap_positions(cont, BOX, offsets[:, None])
+    ids = rng.permutation(n) + 7
+    return wrapped, times, ids
+
+
+def write_h5(
+    path,
+    positions,
+    times,
+    ids,
+    *,
+    centre=(0.0, 0.0, 0.0),
+    first_step=0,
+    time_scalar=False,
+    seed=0,
+    edit=None,
+):
+    """Write one file in the authors' layout; particles shuffled anew in every frame.
+
+    edit(f, group) may change frame f after it is written (bad-input tests)."""
+    rng = np.random.default_rng(seed)
+    centre = np.asarray(centre)
+    with h5py.File(path, "w") as h5:
+        for f, t in enumerate(times):
+            group = h5.create_group(f"Step#{first_step + f}")
+            group.attrs["Time"] = float(t) if time_scalar else np.array([t])
+            group.attrs["Lower"] = -0.5 * BOX.lengths + centre
+            group.attrs["Upper"] = 0.5 * BOX.lengths + centre
+            order = rng.permutation(len(ids))
+            group["Identifier"] = ids[order].astype(np.int64)
+            for axis in range(3):
+                group[f"Coords_{axis}"] = positions[f, order, axis] + centre[axis]
+            if edit is not None:
+                edit(f, group)
+    return path
+
+
+def write_archive(path, files: dict[str, Path]):
+    with tarfile.open(path, "w:gz") as tar:
+        for name, file in files.items():
+            tar.add(file, arcname=name)
+    return path
+
+
+def by_id(positions, ids):
+    """Truth in the importer's order (ascending identifier)."""
+    return positions[:, np.argsort(ids)]
+
+
+def assert_same_positions(got, want, box=BOX):
+    """Equal modulo the box (a coordinate at -l/2 may come back as -l/2 or +l/2 - eps)."""
+    diff = got - want
+    for axis, length in enumerate(box.lengths):
+        np.testing.assert_allclose(wrap_coordinate(diff[..., axis], length), 0.0, atol=1e-12)
+
+
+def le_archive(tmp_path, sign, time_origin=0.0, files=2, **kw):
+    members, truths = {}, []
+    for i in range(files):
+        pos, times, ids = make_trajectory(10 + i, sign=sign, time_origin=time_origin, **kw)
+        members[f"lebc/run{i}.h5"] = write_h5(tmp_path / f"le{i}.h5", pos, times, ids, seed=i)
+        truths.append((pos, times, ids))
+    return write_archive(tmp_path / "le.tar.gz", members), truths
+
+
+# --------------------------------------------------------------------------------------------
+# periodic data, layout variants
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("time_scalar", [False, True])
+def test_periodic_archive_all_files_become_simulations(tmp_path, time_scalar):
+    truths = [make_trajectory(seed, frames=12) for seed in (1, 2, 3)]
+    members = {
+        f"pbc/file{i}.h5": write_h5(tmp_path / f"{i}.h5", *t, time_scalar=time_scalar, seed=i)
+        for i, t in enumerate(truths)
+    }
+    archive = write_archive(tmp_path / "pbc.tar.gz", members)
+    data, report = read_fordatis(archive)
+    assert data.positions.shape == (3, 12, 80, 3)
+    assert data.boundary.kind == "periodic"
+    assert data.radius == pytest.approx(D / 2)
+    assert report.evidence.n_crossers > 0  # periodic crossers were checked, not ignored
+    for s, (pos, times, ids) in enumerate(truths):
+        assert_same_positions(data.positions[s], by_id(pos, ids))
+        np.testing.assert_array_equal(data.times[s], times)
+    assert [sim.name for sim in report.files] == [f"{archive}[pbc/file{i}.h5]" for i in range(3)]
+
+
+def test_single_file_off_centre_box_and_drop_frames(tmp_path):
+    pos, times, ids = make_trajectory(4, frames=15)
+    centre = (1.6e-5, 1.4e-5, 1.8e-5)  # Lower = 0, Upper = box lengths (a common layout)
+    path = write_h5(tmp_path / "one.h5", pos, times, ids, centre=centre, first_step=3)
+    data, report = read_fordatis(path, drop_frames=5)
+    assert data.positions.shape == (1, 10, 80, 3)
+    assert_same_positions(data.positions[0], by_id(pos, ids)[5:])
+    np.testing.assert_array_equal(data.times[0], times[5:])
+    assert (np.abs(data.positions) <= 0.5 * BOX.lengths).all()
+    assert report.files[0].first_step == 3 and report.files[0].dropped == 5
+    np.testing.assert_allclose(report.files[0].centre, centre)
+
+
+def test_files_of_different_length_are_trimmed_and_said(tmp_path):
+    a = make_trajectory(1, frames=14)
+    b = make_trajectory(2, frames=10)
+    archive = write_archive(
+        tmp_path / "x.tar.gz",
+        {"a.h5": write_h5(tmp_path / "a.h5", *a), "b.h5": write_h5(tmp_path / "b.h5", *b)},
+    )
+    data, report = read_fordatis(archive, drop_frames=2)
+    assert data.positions.shape[:2] == (2, 8)
+    assert any("a.h5]: trimmed from 12 to 8" in note for note in report.notes)
+
+
+def test_os_metadata_skipped_and_member_names_never_used_as_paths(tmp_path):
+    pos, times, ids = make_trajectory(5, frames=6)
+    good = write_h5(tmp_path / "good.h5", pos, times, ids)
+    junk = tmp_path / "junk"
+    junk.write_bytes(b"\x00\x05\x16\x07 AppleDouble")
+    work = tmp_path / "work"
+    work.mkdir()
+    archive = write_archive(work / "a.tar.gz", {"../evil.h5": good, "._evil.h5": junk})
+    data, report = read_fordatis(archive)
+    assert data.n_sims == 1 and report.skipped == ["._evil.h5"]
+    assert not (tmp_path / "evil.h5").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Lees-Edwards: sign and time origin
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("sign", [-1, 1])
+def test_le_sign_inferred_both_ways(tmp_path, sign):
+    archive, truths = le_archive(tmp_path, sign)
+    data, report = read_fordatis(archive, shear_rate=SHEAR)
+    le = data.boundary.lees_edwards
+    assert (le.sign, le.time_origin, le.shear_rate) == (sign, 0.0, SHEAR)
+    ev = report.evidence
+    assert ev.n_crossers > 10
+    assert ev.max_crosser[f"sign {sign:+d}"] <= ev.threshold < ev.max_crosser[f"sign {-sign:+d}"]
+    for s, (pos, _, ids) in enumerate(truths):
+        assert_same_positions(data.positions[s], by_id(pos, ids))
+    # the given sign is verified, and the wrong one refused with its evidence
+    read_fordatis(archive, shear_rate=SHEAR, le_sign=sign)
+    with pytest.raises(DatasetError, match="no Lees-Edwards setting .* --le-sign"):
+        read_fordatis(archive, shear_rate=SHEAR, le_sign=-sign, time_origin=0.0)
+
+
+def test_le_time_origin_at_first_stored_frame(tmp_path):
+    archive, _ = le_archive(tmp_path, -1, time_origin=T_START, files=1)
+    data, report = read_fordatis(archive, shear_rate=SHEAR, drop_frames=3)
+    assert data.boundary.lees_edwards.time_origin == pytest.approx(T_START, rel=1e-12)
+    assert "first stored frame" in report.evidence.origin
+
+
+@pytest.mark.parametrize("sign", [-1, 1])
+def test_le_time_origin_estimated_when_no_candidate_fits(tmp_path, sign):
+    true_origin = T_START + 37.3 * DT
+    archive, truths = le_archive(tmp_path, sign, time_origin=true_origin)
+    data, report = read_fordatis(archive, shear_rate=SHEAR)
+    assert data.boundary.lees_edwards.sign == sign
+    assert "estimated" in report.evidence.origin
+    times = truths[0][1]
+    got = data.boundary.offset(times)
+    want = LeesEdwards(SHEAR, sign, true_origin).offset(BOX, times)
+    assert np.abs(wrap_coordinate(got - want, BOX.lz)).max() < 0.02 * D
+
+
+def test_le_without_crossers_needs_le_sign(tmp_path):
+    pos, times, ids = make_trajectory(3, sign=-1, x_band=0.5, vx=0.0)
+    path = write_h5(tmp_path / "calm.h5", pos, times, ids)
+    with pytest.raises(DatasetError, match=r"calm\.h5.*no particle crosses the x faces.*--le-sign"):
+        read_fordatis(path, shear_rate=SHEAR)
+    data, report = read_fordatis(path, shear_rate=SHEAR, le_sign=-1)
+    assert data.boundary.lees_edwards.sign == -1
+    assert "unverified" in report.evidence.origin
+
+
+def test_le_both_signs_fit_is_refused(tmp_path):
+    # times near the origin: delta ~ 0 at every crossing, so the data cannot tell the sign
+    pos, times, ids = make_trajectory(6, sign=1, frames=6, t_start=0.0, vx=0.05)
+    path = write_h5(tmp_path / "early.h5", pos, times, ids)
+    with pytest.raises(DatasetError, match="both Lees-Edwards signs fit.*pass --le-sign"):
+        read_fordatis(path, shear_rate=SHEAR)
+
+
+def test_le_data_read_as_periodic_or_with_wrong_rate_is_refused(tmp_path):
+    archive, _ = le_archive(tmp_path, -1, files=1)
+    with pytest.raises(DatasetError, match="looks like Lees-Edwards data; give --shear-rate"):
+        read_fordatis(archive)
+    with pytest.raises(DatasetError, match="no Lees-Edwards setting.*Check --shear-rate"):
+        read_fordatis(archive, shear_rate=SHEAR * 2.5)
+    # 10% off: every displacement stays small over 40 frames, but the offsets drift
+    with pytest.raises(DatasetError, match=r"drift against --shear-rate 900 1/s: they fit 1000"):
+        read_fordatis(archive, shear_rate=SHEAR * 0.9)
+
+
+def test_le_given_time_origin_is_verified(tmp_path):
+    archive, _ = le_archive(tmp_path, 1, files=1)
+    data, report = read_fordatis(archive, shear_rate=SHEAR, time_origin=0.0)
+    assert "0 s (given)" in report.evidence.origin
+    with pytest.raises(DatasetError, match=r"the crossers put the time origin at .*--time-origin"):
+        read_fordatis(archive, shear_rate=SHEAR, time_origin=2 * DT)
+
+
+# --------------------------------------------------------------------------------------------
+# bad input: each message names the file and the group/field
+# --------------------------------------------------------------------------------------------
+def _bad(tmp_path, edit=None, frames=8, **kw):
+    pos, times, ids = make_trajectory(8, frames=frames)
+    return write_h5(tmp_path / "bad.h5", pos, times, ids, edit=edit, **kw)
+
+
+def _drop(name):
+    def edit(f, group):
+        if f == 3:
+            del group[name]
+
+    return edit
+
+
+def test_bad_member_in_archive(tmp_path):
+    pos, times, ids = make_trajectory(1, frames=6)
+    good = write_h5(tmp_path / "good.h5", pos, times, ids)
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not hdf5")
+    archive = write_archive(tmp_path / "a.tar.gz", {"good.h5": good, "data/notes.txt": notes})
+    with pytest.raises(DatasetError, match=r"a\.tar\.gz\[data/notes\.txt\].*expected an HDF5"):
+        read_fordatis(archive)
+
+
+def test_truncated_archive(tmp_path):
+    pos, times, ids = make_trajectory(1, frames=30)
+    archive = write_archive(
+        tmp_path / "a.tar.gz", {"x.h5": write_h5(tmp_path / "x.h5", pos, times, ids)}
+    )
+    cut = tmp_path / "cut.tar.gz"
+    cut.write_bytes(archive.read_bytes()[: archive.stat().st_size // 2])
+    with pytest.raises(DatasetError, match=r"cut\.tar\.gz.*unreadable archive"):
+        read_fordatis(cut)
+
+
+def test_not_hdf5_nor_tar(tmp_path):
+    path = tmp_path / "x.h5"
+    path.write_text("hello")
+    with pytest.raises(DatasetError, match=r"x\.h5.*expected one HDF5 file or a tar archive"):
+        read_fordatis(path)
+
+
+def test_missing_identifier(tmp_path):
+    with pytest.raises(DatasetError, match=r"bad\.h5: field 'Step#3/Identifier': missing dataset"):
+        read_fordatis(_bad(tmp_path, _drop("Identifier")))
+
+
+def test_missing_coords_and_attr(tmp_path):
+    with pytest.raises(DatasetError, match=r"'Step#3/Coords_2': missing dataset"):
+        read_fordatis(_bad(tmp_path, _drop("Coords_2")))
+
+    def no_time(f, group):
+        if f == 2:
+            del group.attrs["Time"]
+
+    with pytest.raises(DatasetError, match=r"'Step#2 attr Time': missing attribute"):
+        read_fordatis(_bad(tmp_path, no_time))
+
+
+def test_duplicate_identifiers(tmp_path):
+    def dup(f, group):
+        if f == 4:
+            ids = group["Identifier"][()]
+            ids[1] = ids[0]
+            group["Identifier"][...] = ids
+
+    with pytest.raises(DatasetError, match=r"bad\.h5: field 'Step#4/Identifier'.*duplicated"):
+        read_fordatis(_bad(tmp_path, dup))
+
+
+def test_identifier_set_changes(tmp_path):
+    def renumber(f, group):
+        if f == 5:
+            ids = group["Identifier"][()]
+            ids[ids == 7] = 10_000
+            group["Identifier"][...] = ids
+
+    with pytest.raises(
+        DatasetError,
+        match=r"'Step#5/Identifier': expected the same particles as Step#0.*"
+        r"missing \[7\], new \[10000\]",
+    ):
+        read_fordatis(_bad(tmp_path, renumber))
+
+
+def test_moving_box(tmp_path):
+    def move(f, group):
+        if f == 6:
+            group.attrs["Upper"] = group.attrs["Upper"] * 1.01
+
+    with pytest.raises(DatasetError, match=r"bad\.h5: field 'Step#6 attr Upper'.*moving"):
+        read_fordatis(_bad(tmp_path, move))
+
+
+def test_step_gap(tmp_path):
+    path = _bad(tmp_path)
+    with h5py.File(path, "a") as h5:
+        del h5["Step#4"]
+    with pytest.raises(
+        DatasetError, match=r"bad\.h5: field 'Step#4'.*Step#3 is followed by Step#5"
+    ):
+        read_fordatis(path)
+
+
+def test_non_equidistant_times(tmp_path):
+    def late(f, group):
+        if f == 5:
+            group.attrs["Time"] = group.attrs["Time"] + 0.01 * DT
+
+    with pytest.raises(DatasetError, match=r"'Step#5 attr Time': expected equidistant frames"):
+        read_fordatis(_bad(tmp_path, late))
+
+
+def test_non_finite_coordinates(tmp_path):
+    def nan(f, group):
+        if f == 1:
+            group["Coords_1"][0] = np.nan
+
+    with pytest.raises(DatasetError, match=r"'Step#1/Coords_1': expected finite"):
+        read_fordatis(_bad(tmp_path, nan))
+
+
+def test_files_disagree_on_particle_count(tmp_path):
+    a = make_trajectory(1, frames=6)
+    b = make_trajectory(2, frames=6, n=79)
+    archive = write_archive(
+        tmp_path / "x.tar.gz",
+        {"a.h5": write_h5(tmp_path / "a.h5", *a), "b.h5": write_h5(tmp_path / "b.h5", *b)},
+    )
+    with pytest.raises(DatasetError, match=r"x\.tar\.gz\[b\.h5\]: field 'Identifier': expected 80"):
+        read_fordatis(archive)
+
+
+def test_bad_options(tmp_path):
+    path = _bad(tmp_path)
+    with pytest.raises(ValueError, match="above random close packing"):
+        read_fordatis(path, diameter=2 * D * 4)
+    with pytest.raises(ValueError, match="dropping 7 leaves fewer than.*--drop-frames"):
+        read_fordatis(path, drop_frames=7)
+    with pytest.raises(ValueError, match="give --shear-rate"):
+        read_fordatis(path, le_sign=1)
+
+
+# --------------------------------------------------------------------------------------------
+# the command line
+# --------------------------------------------------------------------------------------------
+def test_cli_converts_and_reports(tmp_path):
+    archive, truths = le_archive(tmp_path, -1)
+    out = tmp_path / "out" / "le.h5"
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gripdem.convert",
+            "fordatis",
+            str(archive),
+            str(out),
+            "--shear-rate",
+            "1000",
+            "--drop-frames",
+            "4",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    text = run.stdout
+    for expected in (
+        "files (simulations): 2",
+        "frames per simulation: 36 kept, 4 dropped",
+        "particles: 80",
+        "boundary: lees_edwards",
+        "LE sign: -1",
+        "LE time origin: 0 s",
+        "x-face crossing(s)",
+        "with sign +1",
+        "volume fraction",
+        f"wrote {out}",
+    ):
+        assert expected in text, text
+    data = read_dataset(out)
+    assert data.positions.shape == (2, 36, 80, 3)
+    assert data.boundary.lees_edwards.sign == -1
+    assert data.provenance["generator"] == "gripdem.data.fordatis"
+    pos, times, ids = truths[1]
+    assert_same_positions(data.positions[1], by_id(pos, ids)[4:])
+
+
+def test_cli_refuses_to_overwrite_and_reports_bad_input(tmp_path, capsys):
+    pos, times, ids = make_trajectory(1, frames=6)
+    path = write_h5(tmp_path / "p.h5", pos, times, ids)
+    out = tmp_path / "p_gripdem.h5"
+    assert main(["fordatis", str(path), str(out)]) == 0
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert main(["fordatis", str(path), str(out)]) == 1
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert out.read_bytes() == before
+    assert main(["fordatis", str(path), str(out), "--overwrite", "--drop-frames", "1"]) == 0
+    assert read_dataset(out).n_frames == 5
+    with h5py.File(path, "a") as h5:
+        del h5["Step#2/Coords_0"]
+    assert main(["fordatis", str(path), str(tmp_path / "new.h5")]) == 1
+    err = capsys.readouterr().err
+    assert "p.h5: field 'Step#2/Coords_0': missing dataset" in err and "Traceback" not in err
+    assert not (tmp_path / "new.h5").exists()

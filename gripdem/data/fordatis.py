@@ -325,6 +325,10 @@ def _members(source: Path, workdir: Path, skipped: list[str]) -> Iterator[tuple[
     archive members are streamed to ``workdir`` one at a time."""
     if not source.exists():
         raise FileNotFoundError(f"{source}: no such file")
+    if source.is_dir():
+        raise FordatisError(
+            source, "<file>", "expected an HDF5 file or a tar archive, got a folder"
+        )
     if h5py.is_hdf5(source):
         yield str(source), source
         return

@@ -1,0 +1,360 @@
+"""Input encodings (sincos | vct | unwrapped), their decoders, and per-channel normalisation.
+
+Every encoding turns wrapped positions into per-step deltas between consecutive frames and can
+decode predicted deltas back to wrapped Cartesian positions. Shapes (numpy or torch, any
+leading batch axes ``...``):
+
+- ``encode(positions (..., N, T, 3), offsets (..., T)) -> deltas (..., N, T-1, C)``
+- ``decode(last (..., N, 3), deltas (..., N, f, C), offsets (..., f)) -> (..., N, f, 3)``
+
+``offsets`` are the float64 Lees-Edwards offsets of each frame (``None`` for a periodic box);
+decode takes the offsets of the PREDICTED frames. A difference between frames t and t+1 uses the
+offset of the later frame t+1 (SPEC §2).
+
+Channels:
+
+- ``sincos`` (6): ``[sin x, cos x, sin y, cos y, sin z, cos z]`` of frame t+1 minus frame t, each
+  axis with its own length (the paper's input). About 1e-3 at the default frame interval.
+- ``vct`` (8): channels 0-3 as ``sincos``; 4-5 the "real" z difference to the image of the particle
+  continuous with its previous position (``boundary.displacement`` with the later offset); 6-7
+  the Lees-Edwards shift ``sincos(z_{t+1}) - sincos(z~_{t+1})``, exactly zero except at steps
+  that cross an x face. ``real + shift`` = the plain ``sincos`` difference. In a periodic box the
+  shift channels are zero and not computed. Same layout as the authors' VCT scripts.
+- ``unwrapped`` (3): Cartesian minimum-image displacements ``displacement(p_{t+1}, p_t, δ_{t+1})``.
+
+:class:`Normalizer` holds per-channel mean and std (from the training split only) as plain
+floats, so it can be stored in a checkpoint or in hyperparameters and restored.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+
+from gripdem.boundary import (
+    Boundary,
+    Box,
+    apply_lattice_shift,
+    lattice_shift,
+    sincos_decode,
+    sincos_encode,
+    wrap_coordinate,
+    wrap_positions,
+)
+
+Array = Any  # np.ndarray | torch.Tensor
+
+
+# --------------------------------------------------------------------------------------------
+# small numpy/torch helpers
+# --------------------------------------------------------------------------------------------
+def _torch(x: Array) -> bool:
+    return isinstance(x, torch.Tensor)
+
+
+def _cat(parts: list, like: Array) -> Array:
+    return torch.cat(parts, dim=-1) if _torch(like) else np.concatenate(parts, axis=-1)
+
+
+def _cumsum_steps(x: Array) -> Array:
+    """Cumulative sum over the step axis (-2)."""
+    return torch.cumsum(x, dim=-2) if _torch(x) else np.cumsum(x, axis=-2)
+
+
+def _where(cond: Array, a: Array, b: Array) -> Array:
+    return torch.where(cond, a, b) if _torch(a) else np.where(cond, a, b)
+
+
+def _later_offsets(offsets: Array | None) -> Array | None:
+    """``(..., T)`` frame offsets -> ``(..., 1, T-1)`` offsets of the later frame of each step,
+    broadcastable to per-step arrays ``(..., N, T-1)``."""
+    if offsets is None:
+        return None
+    later = offsets[..., 1:]
+    return later[..., None, :]
+
+
+def step_lattice_shifts(
+    positions: Array, box: Box, offsets: Array | None = None
+) -> tuple[Array, Array]:
+    """Per-step lattice counts and minimum-image displacements between consecutive frames.
+
+    positions ``(..., N, T, 3)`` wrapped; offsets ``(..., T)`` float64 (None: periodic).
+    Returns ``(shift (..., N, T-1, 3), displacement (..., N, T-1, 3))``; ``shift[..., 0] != 0``
+    marks a step that crossed an x face (an LE face in a sheared box).
+    """
+    raw = positions[..., 1:, :] - positions[..., :-1, :]
+    later = _later_offsets(offsets)
+    shift = lattice_shift(raw, box, later)
+    return shift, apply_lattice_shift(raw, shift, box, later)
+
+
+def x_face_crossings(positions: Array, box: Box, offsets: Array | None = None) -> Array:
+    """``(..., N, T, 3)`` -> bool ``(..., N)``: crossed an x face in any of the T-1 steps."""
+    shift, _ = step_lattice_shifts(positions, box, offsets)
+    crossed = shift[..., 0] != 0
+    return crossed.any(dim=-1) if _torch(crossed) else crossed.any(axis=-1)
+
+
+def _step_offset(offsets: Array | None, j: int, like: Array) -> Array | float:
+    """Offset of predicted step j, ``(..., f)`` -> ``(..., 1)`` (broadcast over particles), of
+    ``like``'s kind. The offsets are already wrapped into the box, so a cast is safe."""
+    if offsets is None:
+        return 0.0
+    off = offsets[..., j, None]
+    if _torch(like):
+        return torch.as_tensor(off, dtype=like.dtype, device=like.device)
+    return np.asarray(off, dtype=like.dtype)
+
+
+# --------------------------------------------------------------------------------------------
+# encodings
+# --------------------------------------------------------------------------------------------
+class Encoding:
+    """Base class: per-step deltas of wrapped positions, and their inverse."""
+
+    name: ClassVar[str]
+    n_channels: ClassVar[int]
+    channel_names: ClassVar[tuple[str, ...]]
+
+    def __init__(self, boundary: Boundary):
+        self.boundary = boundary
+
+    @property
+    def box(self) -> Box:
+        return self.boundary.box
+
+    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+        raise NotImplementedError
+
+    def decode(self, last: Array, deltas: Array, offsets: Array | None = None) -> Array:
+        raise NotImplementedError
+
+    def _check(self, deltas: Array) -> None:
+        if deltas.shape[-1] != self.n_channels:
+            raise ValueError(
+                f"encoding {self.name!r} decodes {self.n_channels} channels, got "
+                f"deltas of shape {tuple(deltas.shape)}"
+            )
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(boundary={self.boundary.kind})"
+
+
+class SinCosEncoding(Encoding):
+    """The paper's 6 channels: frame-to-frame differences of per-axis sin/cos features."""
+
+    name = "sincos"
+    n_channels = 6
+    channel_names = ("dsin_x", "dcos_x", "dsin_y", "dcos_y", "dsin_z", "dcos_z")
+
+    def position_features(self, positions: Array) -> Array:
+        """``(..., 3)`` -> ``(..., 6)`` sin/cos position features (the PCT position space)."""
+        return sincos_encode(positions, self.box)
+
+    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+        feats = sincos_encode(positions, self.box)
+        return feats[..., 1:, :] - feats[..., :-1, :]
+
+    def combined(self, deltas: Array) -> Array:
+        """Deltas as 6 plain sin/cos differences (identity here; VCT adds real + shift)."""
+        return deltas
+
+    def accumulate(self, last: Array, deltas: Array) -> Array:
+        """Sin/cos features of the predicted frames: ``sincos(last) + cumsum(deltas)``.
+
+        last ``(..., N, 3)``, deltas ``(..., N, f, C)`` -> ``(..., N, f, 6)`` (off the unit circle
+        when the deltas are imperfect; only the direction of each pair is decoded)."""
+        self._check(deltas)
+        start = sincos_encode(last, self.box)[..., None, :]
+        return start + _cumsum_steps(self.combined(deltas))
+
+    def decode(self, last: Array, deltas: Array, offsets: Array | None = None) -> Array:
+        """Wrapped positions ``(..., N, f, 3)`` by atan2 of the accumulated features. Exact for
+        true deltas in either scene (the features are those of wrapped positions); ``offsets``
+        are not needed."""
+        return sincos_decode(self.accumulate(last, deltas), self.box)
+
+
+class VCTEncoding(SinCosEncoding):
+    """8 channels: sin/cos differences with the z pair split into real + LE shift (SPEC §5)."""
+
+    name = "vct"
+    n_channels = 8
+    channel_names = SinCosEncoding.channel_names[:4] + (
+        "dsin_z_real",
+        "dcos_z_real",
+        "dsin_z_shift",
+        "dcos_z_shift",
+    )
+
+    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+        feats = sincos_encode(positions, self.box)
+        plain = feats[..., 1:, :] - feats[..., :-1, :]
+        zero = plain[..., 4:6] * 0
+        if not self.boundary.is_lees_edwards:
+            return _cat([plain, zero], plain)
+        shift, disp = step_lattice_shifts(positions, self.box, offsets)
+        # sin/cos of the image at t+1 that is continuous with the particle at t (z pair only)
+        cont = sincos_encode(positions[..., :-1, :] + disp, self.box)[..., 4:6]
+        real = cont - feats[..., :-1, 4:6]
+        le_step = (shift[..., 0] != 0)[..., None]
+        real = _where(le_step, real, plain[..., 4:6])
+        moved = _where(le_step, feats[..., 1:, 4:6] - cont, zero)
+        return _cat([plain[..., :4], real, moved], plain)
+
+    def combined(self, deltas: Array) -> Array:
+        return _cat([deltas[..., :4], deltas[..., 4:6] + deltas[..., 6:8]], deltas)
+
+    def decode(
+        self, last: Array, deltas: Array, offsets: Array | None = None, exact_shift: bool = False
+    ) -> Array:
+        """``exact_shift=False`` (the paper's learned VCT): positions from real + shift channels.
+
+        ``exact_shift=True`` (SPEC §8): ignore the shift channels, step with the real channels
+        only, detect an x-face crossing in decoded space (decoded x jumps by more than lx/2) and
+        apply the known shift of that frame's offset. Needs ``offsets (..., f)`` in a sheared box.
+        """
+        if not exact_shift:
+            return super().decode(last, deltas, offsets)
+        self._check(deltas)
+        if self.boundary.is_lees_edwards and offsets is None:
+            raise ValueError("vct decode with exact_shift needs the predicted frames' offsets")
+        box, out, pos = self.box, [], last
+        for j in range(deltas.shape[-2]):
+            feats = sincos_encode(pos, box)
+            # each axis wrapped on its own (no LE remap yet)
+            moved = sincos_decode(feats + deltas[..., j, :6], box)
+            jump = pos[..., 0] - moved[..., 0]
+            n_x = (torch.round if _torch(jump) else np.round)(jump / box.lx)
+            z = wrap_coordinate(moved[..., 2] - n_x * _step_offset(offsets, j, moved), box.lz)
+            pos = _cat([moved[..., :2], z[..., None]], moved)
+            out.append(pos)
+        return torch.stack(out, dim=-2) if _torch(pos) else np.stack(out, axis=-2)
+
+
+class UnwrappedEncoding(Encoding):
+    """3 channels: Cartesian minimum-image displacements between consecutive frames."""
+
+    name = "unwrapped"
+    n_channels = 3
+    channel_names = ("dx", "dy", "dz")
+
+    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+        return step_lattice_shifts(positions, self.box, offsets)[1]
+
+    def decode(self, last: Array, deltas: Array, offsets: Array | None = None) -> Array:
+        """Step by step: ``p_{t+1} = wrap(p_t + d_t, δ_{t+1})``, the exact inverse of
+        :meth:`encode` (each displacement is to the image continuous with the previous frame,
+        so each frame is wrapped with its own offset)."""
+        self._check(deltas)
+        if self.boundary.is_lees_edwards and offsets is None:
+            raise ValueError("unwrapped decode needs the offsets of the predicted frames")
+        out, pos = [], last
+        for j in range(deltas.shape[-2]):
+            pos = wrap_positions(pos + deltas[..., j, :], self.box, _step_offset(offsets, j, pos))
+            out.append(pos)
+        return torch.stack(out, dim=-2) if _torch(pos) else np.stack(out, axis=-2)
+
+
+ENCODINGS: dict[str, type[Encoding]] = {
+    cls.name: cls for cls in (SinCosEncoding, VCTEncoding, UnwrappedEncoding)
+}
+
+
+def make_encoding(name: str, boundary: Boundary) -> Encoding:
+    """The encoding called ``name`` for ``boundary`` (a clear error for an unknown name)."""
+    if name not in ENCODINGS:
+        raise ValueError(f"unknown encoding {name!r}; expected one of {sorted(ENCODINGS)}")
+    return ENCODINGS[name](boundary)
+
+
+# --------------------------------------------------------------------------------------------
+# normalisation
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Normalizer:
+    """Per-channel ``(x - mean) / std``. Plain floats: store :meth:`to_dict` in a checkpoint or
+    in hyperparameters and rebuild with :meth:`from_dict`. A channel with zero spread (e.g. the
+    VCT shift channels without crossings) keeps ``std = 1``."""
+
+    mean: tuple[float, ...]
+    std: tuple[float, ...]
+    encoding: str = ""
+    count: int = 0
+
+    def __post_init__(self) -> None:
+        if len(self.mean) != len(self.std):
+            raise ValueError(f"mean has {len(self.mean)} channels but std {len(self.std)}")
+        if not all(math.isfinite(s) and s > 0 for s in self.std):
+            raise ValueError(f"std must be positive and finite, got {self.std}")
+        object.__setattr__(self, "mean", tuple(float(m) for m in self.mean))
+        object.__setattr__(self, "std", tuple(float(s) for s in self.std))
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.mean)
+
+    @classmethod
+    def identity(cls, n_channels: int, encoding: str = "") -> Normalizer:
+        return cls((0.0,) * n_channels, (1.0,) * n_channels, encoding, 0)
+
+    @classmethod
+    def fit(cls, chunks: Iterable[np.ndarray], encoding: str = "") -> Normalizer:
+        """Statistics over chunks ``(..., C)`` merged in float64 (Chan's pairwise update)."""
+        n, mean, m2 = 0, None, None
+        for chunk in chunks:
+            x = np.asarray(chunk, dtype=np.float64).reshape(-1, chunk.shape[-1])
+            if x.shape[0] == 0:
+                continue
+            cm = x.mean(axis=0)
+            cm2 = ((x - cm) ** 2).sum(axis=0)
+            if mean is None:
+                n, mean, m2 = x.shape[0], cm, cm2
+                continue
+            total = n + x.shape[0]
+            delta = cm - mean
+            mean = mean + delta * (x.shape[0] / total)
+            m2 = m2 + cm2 + delta**2 * (n * x.shape[0] / total)
+            n = total
+        if mean is None:
+            raise ValueError("cannot fit a normaliser on no data")
+        std = np.sqrt(m2 / n)
+        std = np.where(std > 0, std, 1.0)
+        return cls(tuple(mean), tuple(std), encoding, n)
+
+    def _stats(self, like: Array) -> tuple[Array, Array]:
+        if _torch(like):
+            kw = {"dtype": like.dtype, "device": like.device}
+            return torch.tensor(self.mean, **kw), torch.tensor(self.std, **kw)
+        return np.asarray(self.mean, like.dtype), np.asarray(self.std, like.dtype)
+
+    def normalize(self, x: Array) -> Array:
+        mean, std = self._stats(x)
+        return (x - mean) / std
+
+    def denormalize(self, x: Array) -> Array:
+        mean, std = self._stats(x)
+        return x * std + mean
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "encoding": self.encoding,
+            "mean": list(self.mean),
+            "std": list(self.std),
+            "count": self.count,
+        }
+
+    @classmethod
+    def from_dict(cls, state: dict[str, Any]) -> Normalizer:
+        return cls(
+            tuple(state["mean"]),
+            tuple(state["std"]),
+            state.get("encoding", ""),
+            int(state.get("count", 0)),
+        )

@@ -19,8 +19,9 @@ What the importer does (and why):
 - the files carry no particle size: ``diameter`` (default the paper's 2.5e-6 m, read as a
   diameter, SPEC §2) sets the radius;
 - Lees-Edwards data: the shear rate comes from the user, the sign convention and the time origin
-  (time at which delta = 0) are inferred from particles that cross the x faces, see
-  :func:`infer_lees_edwards`.
+  (time at which delta = 0) are inferred from particles that cross the x faces, and the shear
+  rate is checked against them: :func:`gripdem.data.le_inference.infer_lees_edwards`. Periodic
+  data (no shear rate) is checked too: its crossers must not jump in z.
 
 Archive members are copied one at a time into a private temporary directory under a generated
 name (the member's own name is never used as a path, so no path traversal) and deleted after

@@ -10,6 +10,12 @@ wrong sign a crosser's z jumps by ``2*delta`` (mod lz), with a wrong origin by t
 "Small" is ``max(SMALL_FACTOR * largest non-crosser displacement, SMALL_FLOOR * diameter)``: a
 crosser is a particle near an x face, so the non-crossers near the faces move as much as it
 does when the settings are right.
+
+The "small" test alone cannot see an origin or rate error smaller than that threshold, so each
+crossing also implies the offset at its time (its z jump, corrected for the mean flow at the
+face): :func:`fit_offsets` compares those with the settings. A wrong origin leaves a constant
+error (the origin is then estimated from them), a wrong shear rate a drift in time (refused,
+with the rate the crossers fit).
 """
 
 from __future__ import annotations

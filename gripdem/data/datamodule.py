@@ -1,0 +1,522 @@
+"""LightningDataModule over a gripdem HDF5 file: windows, encodings, graphs, batches.
+
+One class serves both scenes (the boundary comes from the file). The file is opened lazily:
+:func:`gripdem.data.schema.read_meta` at ``setup``, positions read per window, one h5py handle
+per worker process. Batches are :class:`WindowBatch` dataclasses with a ``.to(device)`` method,
+which Lightning's ``transfer_batch_to_device`` calls as it is (and the DataLoader's
+``pin_memory`` calls ``.pin_memory()``).
+
+Normalisation statistics come from the frames covered by the training windows only, and are
+part of :meth:`TrajectoryDataModule.state_dict` (Lightning saves it in every checkpoint and
+restores it with ``load_state_dict``); ``normalizer.to_dict()`` can also go into the model's
+hyperparameters.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import h5py
+import lightning as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from gripdem.data.features import (
+    ENCODINGS,
+    Encoding,
+    Normalizer,
+    make_encoding,
+    x_face_crossings,
+)
+from gripdem.data.graph import DEFAULT_ALPHA, Graph, build_graph
+from gripdem.data.schema import DatasetError, DatasetMeta, read_meta
+from gripdem.data.windows import PARTS, Split, WindowIndex, WindowPlan, plan_windows
+
+#: frames read at once while fitting the normaliser (bounds memory on long simulations)
+_FIT_CHUNK_FRAMES = 256
+
+
+# --------------------------------------------------------------------------------------------
+# the batch
+# --------------------------------------------------------------------------------------------
+@dataclass
+class WindowBatch:
+    """A batch of windows. ``B`` windows, ``N`` particles, ``K`` history_len, ``f`` horizon,
+    ``C`` channels of the encoding, ``T = K + 1 + f`` frames, ``E`` edges of all graphs.
+
+    Encoded arrays are normalised (:class:`~gripdem.data.features.Normalizer` of the
+    DataModule) float32; positions, times and LE offsets are float64 (positions are wrapped
+    into the box; offsets are the float64 δ of each frame, zeros in a periodic box).
+
+    - ``inputs (B, N, K, C)``: encoded deltas of the K input steps.
+    - ``target_deltas (B, N, f, C)``: encoded deltas of the f target steps (the first one from the
+      last observed frame to the first target frame).
+    - ``input_positions (B, N, K+1, 3)``, ``target_positions (B, N, f, 3)``: wrapped Cartesian.
+    - ``times (B, T)``, ``offsets (B, T)``: absolute frame times and LE offsets of all frames.
+    - Graph at the last observed frame, batched: ``edge_index (2, E)`` into the flattened
+      ``B*N`` particles (sample b's particles are ``b*N .. b*N+N-1``; row 0 receives, row 1 is
+      the neighbour; self pairs included), ``edge_weight (E,)`` = G_fixed, ``edge_vector (E, 3)``
+      minimum-image ``r_j - r_i`` and ``edge_distance (E,)`` in particle diameters,
+      ``edge_ptr (B+1,)`` first edge of each sample.
+    - ``crossing_mask (B, N)`` bool: crossed an x face (the LE faces in a sheared box) in one of
+      the f target steps.
+    - ``sim_index (B,)``, ``window_start (B,)``: simulation index and first frame of each window.
+    - ``in_sample``: True under the ``paper`` protocol (train = test); report it.
+    """
+
+    inputs: torch.Tensor
+    target_deltas: torch.Tensor
+    input_positions: torch.Tensor
+    target_positions: torch.Tensor
+    times: torch.Tensor
+    offsets: torch.Tensor
+    edge_index: torch.Tensor
+    edge_weight: torch.Tensor
+    edge_vector: torch.Tensor
+    edge_distance: torch.Tensor
+    edge_ptr: torch.Tensor
+    crossing_mask: torch.Tensor
+    sim_index: torch.Tensor
+    window_start: torch.Tensor
+    in_sample: bool = False
+
+    @property
+    def batch_size(self) -> int:
+        return int(self.inputs.shape[0])
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.inputs.shape[1])
+
+    @property
+    def history_len(self) -> int:
+        return int(self.inputs.shape[2])
+
+    @property
+    def horizon(self) -> int:
+        return int(self.target_deltas.shape[2])
+
+    @property
+    def last_positions(self) -> torch.Tensor:
+        """``(B, N, 3)`` float64 wrapped positions at the last observed frame."""
+        return self.input_positions[:, :, -1]
+
+    @property
+    def decoder_seed(self) -> torch.Tensor:
+        """``(B, N, C)`` the encoded input of the last step (GRIP decoder input)."""
+        return self.inputs[:, :, -1]
+
+    @property
+    def input_times(self) -> torch.Tensor:
+        """``(B, K+1)`` absolute times of the input frames."""
+        return self.times[:, : self.history_len + 1]
+
+    @property
+    def input_offsets(self) -> torch.Tensor:
+        """``(B, K+1)`` float64 LE offsets of the input frames."""
+        return self.offsets[:, : self.history_len + 1]
+
+    @property
+    def target_times(self) -> torch.Tensor:
+        """``(B, f)`` absolute times of the target frames."""
+        return self.times[:, -self.horizon :]
+
+    @property
+    def target_offsets(self) -> torch.Tensor:
+        """``(B, f)`` float64 LE offsets of the target frames (what decoders need)."""
+        return self.offsets[:, -self.horizon :]
+
+    def _map(self, fn) -> WindowBatch:
+        return replace(
+            self,
+            **{
+                f.name: fn(getattr(self, f.name))
+                for f in fields(self)
+                if isinstance(getattr(self, f.name), torch.Tensor)
+            },
+        )
+
+    def to(self, device: torch.device | str, non_blocking: bool = False) -> WindowBatch:
+        """Move every tensor, keeping dtypes (float64 stays float64)."""
+        return self._map(lambda t: t.to(device, non_blocking=non_blocking))
+
+    def pin_memory(self) -> WindowBatch:
+        return self._map(lambda t: t.pin_memory())
+
+
+def collate_windows(samples: Sequence[dict[str, Any]]) -> WindowBatch:
+    """Stack samples from :class:`WindowDataset` into a :class:`WindowBatch`."""
+
+    def stack(key: str) -> torch.Tensor:
+        return torch.from_numpy(np.stack([s[key] for s in samples]))
+
+    n = samples[0]["inputs"].shape[0]
+    graphs: list[Graph] = [s["graph"] for s in samples]
+    counts = [g.n_edges for g in graphs]
+    edge_index = np.concatenate([g.edge_index + b * n for b, g in enumerate(graphs)], axis=1)
+    return WindowBatch(
+        inputs=stack("inputs"),
+        target_deltas=stack("target_deltas"),
+        input_positions=stack("input_positions"),
+        target_positions=stack("target_positions"),
+        times=stack("times"),
+        offsets=stack("offsets"),
+        edge_index=torch.from_numpy(edge_index),
+        edge_weight=torch.from_numpy(np.concatenate([g.edge_weight for g in graphs])),
+        edge_vector=torch.from_numpy(np.concatenate([g.edge_vector for g in graphs])),
+        edge_distance=torch.from_numpy(np.concatenate([g.edge_distance for g in graphs])),
+        edge_ptr=torch.from_numpy(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)),
+        crossing_mask=stack("crossing_mask"),
+        sim_index=torch.tensor([s["sim"] for s in samples], dtype=torch.int64),
+        window_start=torch.tensor([s["start"] for s in samples], dtype=torch.int64),
+        in_sample=bool(samples[0]["in_sample"]),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# the dataset
+# --------------------------------------------------------------------------------------------
+class _FrameReader:
+    """Positions of a gripdem file, read lazily; one h5py handle per process (workers fork)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._h5: h5py.File | None = None
+        self._pid = -1
+
+    def read(self, sim: int, start: int, stop: int) -> np.ndarray:
+        """``(stop-start, N, 3)`` float64 wrapped positions."""
+        if self._h5 is None or self._pid != os.getpid():
+            self._h5 = h5py.File(self.path, "r")
+            self._pid = os.getpid()
+        return np.asarray(self._h5["positions"][sim, start:stop], dtype=np.float64)
+
+    def close(self) -> None:
+        if self._h5 is not None and self._pid == os.getpid():
+            self._h5.close()
+        self._h5 = None
+
+    def __getstate__(self) -> dict:
+        return {"path": self.path, "_h5": None, "_pid": -1}
+
+
+class WindowDataset(Dataset):
+    """Windows of one protocol part, as sample dicts for :func:`collate_windows`.
+
+    The graph depends only on the last observed frame: it is cached per (simulation, frame)
+    in an LRU bounded by ``graph_cache_mb`` (per worker process).
+    """
+
+    def __init__(
+        self,
+        reader: _FrameReader,
+        meta: DatasetMeta,
+        times: np.ndarray,
+        windows: WindowIndex,
+        encoding: Encoding,
+        normalizer: Normalizer,
+        graph_cutoff: float,
+        graph_alpha: float = DEFAULT_ALPHA,
+        graph_cache_mb: float = 256.0,
+        in_sample: bool = False,
+    ):
+        self.reader = reader
+        self.meta = meta
+        self.times = times
+        self.offsets = meta.boundary.offset(times)
+        self.windows = windows
+        self.encoding = encoding
+        self.normalizer = normalizer
+        self.graph_cutoff = graph_cutoff
+        self.graph_alpha = graph_alpha
+        self.graph_cache_bytes = graph_cache_mb * 2**20
+        self.in_sample = in_sample
+        self._graphs: OrderedDict[tuple[int, int], Graph] = OrderedDict()
+        self._graph_bytes = 0
+
+    def __len__(self) -> int:
+        return len(self.windows)
+
+    def graph(self, sim: int, frame: int, positions: np.ndarray) -> Graph:
+        key = (sim, frame)
+        if key in self._graphs:
+            self._graphs.move_to_end(key)
+            return self._graphs[key]
+        g = build_graph(
+            positions,
+            self.meta.box,
+            float(self.offsets[sim, frame]),
+            self.graph_cutoff,
+            self.graph_alpha,
+            length_unit=self.meta.diameter,
+        )
+        self._graphs[key] = g
+        self._graph_bytes += g.nbytes
+        while self._graph_bytes > self.graph_cache_bytes and len(self._graphs) > 1:
+            _, old = self._graphs.popitem(last=False)
+            self._graph_bytes -= old.nbytes
+        return g
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        w = self.windows[index]
+        k = w.history_len
+        pos = self.reader.read(w.sim, w.start, w.stop).transpose(1, 0, 2)  # (N, T, 3)
+        offs = self.offsets[w.sim, w.start : w.stop]
+        deltas = self.normalizer.normalize(self.encoding.encode(pos, offs)).astype(np.float32)
+        return {
+            "inputs": np.ascontiguousarray(deltas[:, :k]),
+            "target_deltas": np.ascontiguousarray(deltas[:, k:]),
+            "input_positions": np.ascontiguousarray(pos[:, : k + 1]),
+            "target_positions": np.ascontiguousarray(pos[:, k + 1 :]),
+            "times": self.times[w.sim, w.start : w.stop].copy(),
+            "offsets": offs.copy(),
+            "graph": self.graph(w.sim, w.last_observed, np.ascontiguousarray(pos[:, k])),
+            "crossing_mask": x_face_crossings(pos[:, k:], self.meta.box, offs[k:]),
+            "sim": w.sim,
+            "start": w.start,
+            "in_sample": self.in_sample,
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# the DataModule
+# --------------------------------------------------------------------------------------------
+class TrajectoryDataModule(L.LightningDataModule):
+    """Windows of a gripdem HDF5 file for a split ``h-f`` and a protocol (see
+    :mod:`gripdem.data.windows`), encoded (:mod:`gripdem.data.features`) with the fixed graph
+    (:mod:`gripdem.data.graph`). Arguments mirror ``conf/data/default.yaml``.
+
+    ``graph_cutoff`` is in particle diameters (SPEC §2: D = 3 d). ``expect_boundary``
+    (``periodic`` | ``lees_edwards``), when given, must match the file's boundary.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike | None,
+        split: Split | str | Mapping = "190-10",
+        protocol: str = "auto",
+        fractions: Mapping[str, float] | None = None,
+        sims: Mapping[str, Sequence[int] | None] | None = None,
+        simulations: Sequence[int] | None = None,
+        paper_windows: int = 1,
+        history_len: int | None = None,
+        train_stride: int = 1,
+        eval_stride: int | None = None,
+        encoding: str = "sincos",
+        normalise: bool = True,
+        graph_cutoff: float = 3.0,
+        graph_alpha: float = DEFAULT_ALPHA,
+        graph_cache_mb: float = 256.0,
+        batch_size: int = 1,
+        num_workers: int = 0,
+        pin_memory: bool = False,
+        expect_boundary: str | None = None,
+    ):
+        super().__init__()
+        if path is None:
+            raise ValueError(
+                "data.path is null: give a gripdem HDF5 file (the runner resolves "
+                "null to the built-in scene dataset before building the DataModule)"
+            )
+        self.path = Path(path)
+        self.split = Split.parse(split)
+        self.plan_args = dict(
+            protocol=protocol,
+            history_len=history_len,
+            train_stride=int(train_stride),
+            eval_stride=eval_stride,
+            fractions=None if fractions is None else dict(fractions),
+            sims=None if sims is None else dict(sims),
+            simulations=None if simulations is None else list(simulations),
+            paper_windows=int(paper_windows),
+        )
+        self.encoding_name = encoding
+        self.normalise = bool(normalise)
+        if not graph_cutoff > 0:
+            raise ValueError(
+                f"graph_cutoff (in particle diameters) must be positive, got {graph_cutoff!r}"
+            )
+        self.graph_cutoff = float(graph_cutoff)
+        self.graph_alpha = float(graph_alpha)
+        self.graph_cache_mb = float(graph_cache_mb)
+        self.batch_size = int(batch_size)
+        self.num_workers = int(num_workers)
+        self.pin_memory = bool(pin_memory)
+        self.expect_boundary = expect_boundary
+        self.meta: DatasetMeta | None = None
+        self.plan: WindowPlan | None = None
+        self.encoding: Encoding | None = None
+        self.normalizer: Normalizer | None = None
+        self._restored: Normalizer | None = None
+        self.datasets: dict[str, WindowDataset] = {}
+
+    @classmethod
+    def from_config(cls, data: Any, split: Any, **overrides: Any) -> TrajectoryDataModule:
+        """Build from the ``data`` and ``split`` config nodes (DictConfig or plain mappings;
+        ``split`` may also be a string ``"h-f"``). ``overrides`` win (e.g. ``path=`` resolved
+        by the runner)."""
+        data, split = _plain(data), _plain(split)
+        kwargs = {k: v for k, v in data.items() if not str(k).startswith("_")}
+        kwargs.update(overrides)
+        if isinstance(split, Mapping):
+            split = {"history": split.get("history"), "horizon": split.get("horizon")}
+        return cls(split=split, **kwargs)
+
+    # ---- setup ---------------------------------------------------------------------------
+    def setup(self, stage: str | None = None) -> None:
+        if self.plan is not None:
+            return
+        meta = read_meta(self.path)
+        if self.expect_boundary is not None and meta.boundary.kind != self.expect_boundary:
+            raise DatasetError(
+                self.path,
+                "boundary",
+                f"the scene expects "
+                f"{self.expect_boundary!r} data, the file holds "
+                f"{meta.boundary.kind!r}",
+            )
+        with h5py.File(self.path, "r") as h5:
+            times = np.asarray(h5["times"][()], dtype=np.float64)
+        self.meta = meta
+        self.plan = plan_windows(meta.n_sims, meta.n_frames, self.split, **self.plan_args)
+        self.encoding = make_encoding(self.encoding_name, meta.boundary)
+        reader = _FrameReader(self.path)
+        if self._restored is not None:
+            self.normalizer = self._restored
+        elif self.normalise:
+            self.normalizer = self._fit_normalizer(reader, times)
+        else:
+            self.normalizer = Normalizer.identity(self.encoding.n_channels, self.encoding.name)
+        if self.normalizer.n_channels != self.encoding.n_channels:
+            raise ValueError(
+                f"normaliser has {self.normalizer.n_channels} channels but "
+                f"encoding {self.encoding.name!r} has {self.encoding.n_channels}"
+            )
+        cutoff = self.graph_cutoff * meta.diameter
+        self.datasets = {
+            part: WindowDataset(
+                reader,
+                meta,
+                times,
+                self.plan.part(part),
+                self.encoding,
+                self.normalizer,
+                cutoff,
+                self.graph_alpha,
+                self.graph_cache_mb,
+                self.plan.in_sample,
+            )
+            for part in PARTS
+        }
+
+    def _fit_normalizer(self, reader: _FrameReader, times: np.ndarray) -> Normalizer:
+        """Channel statistics over every step inside the frames the training windows cover
+        (each step once), read in chunks."""
+        offsets = self.meta.boundary.offset(times)
+
+        def chunks():
+            for sim, intervals in self.plan.train.frames_used().items():
+                for a, b in intervals:
+                    for lo in range(a, b - 1, _FIT_CHUNK_FRAMES):
+                        hi = min(b, lo + _FIT_CHUNK_FRAMES + 1)
+                        pos = reader.read(sim, lo, hi).transpose(1, 0, 2)
+                        yield self.encoding.encode(pos, offsets[sim, lo:hi])
+
+        return Normalizer.fit(chunks(), self.encoding.name)
+
+    # ---- loaders -------------------------------------------------------------------------
+    def _loader(self, part: str, shuffle: bool) -> DataLoader:
+        if not self.datasets:
+            raise RuntimeError("call setup() before asking for a dataloader")
+        return DataLoader(
+            self.datasets[part],
+            batch_size=self.batch_size,
+            shuffle=shuffle,
+            num_workers=self.num_workers,
+            collate_fn=collate_windows,
+            pin_memory=self.pin_memory,
+            persistent_workers=self.num_workers > 0,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", shuffle=True)
+
+    def val_dataloader(self) -> DataLoader | list:
+        return self._loader("val", shuffle=False) if len(self.datasets["val"]) else []
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+    def predict_dataloader(self) -> DataLoader:
+        return self._loader("test", shuffle=False)
+
+    # ---- reporting and checkpoints ---------------------------------------------------------
+    @property
+    def in_sample(self) -> bool:
+        if self.plan is None:
+            return self.plan_args["protocol"] == "paper"
+        return self.plan.in_sample
+
+    @property
+    def n_channels(self) -> int:
+        if self.encoding_name not in ENCODINGS:
+            raise ValueError(
+                f"unknown encoding {self.encoding_name!r}; expected one of {sorted(ENCODINGS)}"
+            )
+        return ENCODINGS[self.encoding_name].n_channels
+
+    def summary(self) -> dict[str, Any]:
+        """Plain values describing the data for logs and hyperparameters (after setup)."""
+        if self.plan is None or self.meta is None:
+            raise RuntimeError("call setup() first")
+        return {
+            "path": str(self.path),
+            "boundary": self.meta.boundary.kind,
+            "n_particles": self.meta.n_particles,
+            "n_sims": self.meta.n_sims,
+            "n_frames": self.meta.n_frames,
+            "frame_interval": self.meta.frame_interval,
+            "encoding": self.encoding.name,
+            "n_channels": self.encoding.n_channels,
+            "normalise": self.normalise,
+            "graph_cutoff_diameters": self.graph_cutoff,
+            "graph_alpha": self.graph_alpha,
+            **self.plan.summary(),
+        }
+
+    def state_dict(self) -> dict[str, Any]:
+        if self.normalizer is None:
+            return {}
+        return {"normalizer": self.normalizer.to_dict(), "encoding": self.encoding_name}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Restore the normaliser a model was trained with (also after setup)."""
+        if "normalizer" not in state_dict:
+            return
+        if state_dict.get("encoding", self.encoding_name) != self.encoding_name:
+            raise ValueError(
+                f"checkpoint was trained with encoding {state_dict['encoding']!r}, "
+                f"this DataModule uses {self.encoding_name!r}"
+            )
+        self._restored = Normalizer.from_dict(state_dict["normalizer"])
+        if self.datasets:
+            self.normalizer = self._restored
+            for ds in self.datasets.values():
+                ds.normalizer = self._restored
+
+    def teardown(self, stage: str | None = None) -> None:
+        if self.datasets:
+            self.datasets["train"].reader.close()
+
+
+def _plain(node: Any) -> Any:
+    """A DictConfig as a resolved plain container; anything else as it is."""
+    from omegaconf import DictConfig, OmegaConf
+
+    return OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node

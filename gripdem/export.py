@@ -1,0 +1,178 @@
+"""Export predicted and true trajectories for OVITO, ParaView and LAMMPS users.
+
+Extended XYZ (OVITO and ParaView open it; ASE reads it): one file per trajectory, so the truth
+and the prediction load as two pipelines that can be overlaid or compared frame by frame::
+
+    window000_true.xyz   window000_pred.xyz   (and window000_<baseline>.xyz on request)
+
+Frame 0 is the last observed frame (identical in both files), frames 1..f the horizon. Each
+frame's comment line::
+
+    Lattice="lx 0 0 0 ly 0 0 0 lz" Origin="-lx/2 -ly/2 -lz/2" pbc="T T T"
+    Properties=species:S:1:pos:R:3:radius:R:1:id:I:1:crosser:I:1[:error:R:1]
+    Time=<s> step=<j> window=<w> boundary=<kind> le_offset=<delta>
+
+The cell written is the orthorhombic box that the wrapped positions fill (not the sheared LE
+cell, whose parallelepiped the wrapped positions do not fill); the LE offset delta of the frame
+is given as ``le_offset`` (the +x image is shifted by ``le_offset`` along z). ``crosser`` is 1
+for particles whose truth crosses an x face during the horizon, ``error`` (prediction files
+only) the minimum-image distance to the truth at that frame. Lengths are in the data's units
+(metres by default); particles have species ``P``.
+
+LAMMPS text dumps (``ITEM: ATOMS id type x y z radius``) with an orthogonal box are written by
+:func:`write_lammps_dump` for tools that prefer them; the LE offset goes into nothing there
+(LAMMPS tilts its box along x, our flow axis is z), so use extended XYZ for LE data.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from gripdem import metrics
+from gripdem.data.h5io import atomic_write_text
+from gripdem.predictions import Predictions, read_predictions
+
+FLOAT = "%.12g"
+
+
+def _trajectories(p: Predictions, window: int) -> dict[str, np.ndarray]:
+    """``{"true": ..., "pred": ..., <baseline>: ...}``, each ``(horizon + 1, particles, 3)``
+    with the last observed frame first."""
+    if not 0 <= window < p.n_windows:
+        raise IndexError(f"window {window} out of range: the predictions hold {p.n_windows}")
+    last = p.last_positions[window][None]
+    out = {
+        "true": np.concatenate([last, p.true_positions[window]]),
+        "pred": np.concatenate([last, p.pred_positions[window]]),
+    }
+    for name, arr in p.baselines.items():
+        out[name] = np.concatenate([last, arr[window]])
+    return out
+
+
+def _frame_info(p: Predictions, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Times and LE offsets of frames 0..f of a window (frame 0 = last observed)."""
+    times = np.concatenate([[p.times[window, 0] - p.frame_interval], p.times[window]])
+    return times, p.boundary.offset(times)
+
+
+def extxyz_text(
+    positions: np.ndarray,
+    p: Predictions,
+    window: int,
+    errors: np.ndarray | None = None,
+    crossers: np.ndarray | None = None,
+) -> str:
+    """Extended XYZ text of ``positions`` ``(frames, particles, 3)`` of one window."""
+    times, offsets = _frame_info(p, window)
+    n = positions.shape[1]
+    lx, ly, lz = (float(v) for v in p.box.lengths)
+    props = "species:S:1:pos:R:3:radius:R:1:id:I:1:crosser:I:1"
+    if errors is not None:
+        props += ":error:R:1"
+    radius = np.full(n, p.radius)
+    ids = np.arange(1, n + 1)
+    cross = np.zeros(n, int) if crossers is None else crossers.astype(int)
+    buf = io.StringIO()
+    for j, frame in enumerate(positions):
+        buf.write(f"{n}\n")
+        buf.write(
+            f'Lattice="{lx!r} 0 0 0 {ly!r} 0 0 0 {lz!r}" '
+            f'Origin="{-lx / 2!r} {-ly / 2!r} {-lz / 2!r}" pbc="T T T" '
+            f"Properties={props} Time={float(times[j])!r} step={j} window={window} "
+            f"boundary={p.boundary.kind} le_offset={float(offsets[j])!r}\n"
+        )
+        columns = [frame[:, 0], frame[:, 1], frame[:, 2], radius, ids, cross]
+        fmt = f"P {FLOAT} {FLOAT} {FLOAT} {FLOAT} %d %d"
+        if errors is not None:
+            columns.append(errors[j])
+            fmt += f" {FLOAT}"
+        np.savetxt(buf, np.column_stack(columns), fmt=fmt)
+    return buf.getvalue()
+
+
+def export_extxyz(
+    source: str | os.PathLike | Predictions,
+    out_dir: str | os.PathLike,
+    windows: list[int] | None = None,
+    baselines: bool = False,
+    overwrite: bool = False,
+) -> dict[str, Path]:
+    """Write ``window<www>_true.xyz`` and ``window<www>_pred.xyz`` (and one per stored baseline
+    with ``baselines=True``) for each window (default: the first only). Returns
+    ``{"window000_true": path, ...}``; atomic writes, existing files kept unless
+    ``overwrite=True``."""
+    p = source if isinstance(source, Predictions) else read_predictions(source)
+    out_dir = Path(out_dir)
+    written: dict[str, Path] = {}
+    all_crossers = metrics.crossing_mask(p.last_positions, p.true_positions, p.box, p.offsets())
+    for w in [0] if windows is None else windows:
+        series = _trajectories(p, w)
+        _, offsets = _frame_info(p, w)
+        for name, positions in series.items():
+            if name != "true" and name != "pred" and not baselines:
+                continue
+            errors = None
+            if name != "true":
+                res = metrics.position_residuals(
+                    positions[None], series["true"][None], p.box, offsets[None]
+                )[0]
+                errors = np.sqrt((res**2).sum(-1))
+            key = f"window{w:03d}_{name}"
+            text = extxyz_text(positions, p, w, errors, all_crossers[w])
+            written[key] = atomic_write_text(out_dir / f"{key}.xyz", text, overwrite)
+    return written
+
+
+def write_lammps_dump(
+    path: str | os.PathLike,
+    positions: np.ndarray,
+    box_lengths: np.ndarray,
+    radius: float,
+    timesteps: np.ndarray | None = None,
+    overwrite: bool = False,
+) -> Path:
+    """LAMMPS text dump of ``positions`` ``(frames, particles, 3)`` in an orthogonal box
+    centred at the origin (``ITEM: ATOMS id type x y z radius``, type 1)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    frames, n, _ = positions.shape
+    steps = np.arange(frames) if timesteps is None else np.asarray(timesteps)
+    half = [0.5 * float(v) for v in np.asarray(box_lengths, dtype=np.float64)]
+    ids = np.arange(1, n + 1)
+    buf = io.StringIO()
+    for j in range(frames):
+        buf.write(f"ITEM: TIMESTEP\n{int(steps[j])}\nITEM: NUMBER OF ATOMS\n{n}\n")
+        buf.write("ITEM: BOX BOUNDS pp pp pp\n")
+        for h in half:
+            buf.write(f"{-h!r} {h!r}\n")
+        buf.write("ITEM: ATOMS id type x y z radius\n")
+        table = np.column_stack([ids, np.ones(n), positions[j], np.full(n, radius)])
+        np.savetxt(buf, table, fmt=f"%d %d {FLOAT} {FLOAT} {FLOAT} {FLOAT}")
+    return atomic_write_text(path, buf.getvalue(), overwrite)
+
+
+def export_lammps(
+    source: str | os.PathLike | Predictions,
+    out_dir: str | os.PathLike,
+    window: int = 0,
+    overwrite: bool = False,
+) -> dict[str, Path]:
+    """``window<www>_true.dump`` and ``window<www>_pred.dump`` of one window (frame 0 = last
+    observed; TIMESTEP = horizon step)."""
+    p = source if isinstance(source, Predictions) else read_predictions(source)
+    out: dict[str, Path] = {}
+    for name, positions in _trajectories(p, window).items():
+        if name in ("true", "pred"):
+            key = f"window{window:03d}_{name}"
+            out[key] = write_lammps_dump(
+                Path(out_dir) / f"{key}.dump",
+                positions,
+                p.box.lengths,
+                p.radius,
+                overwrite=overwrite,
+            )
+    return out

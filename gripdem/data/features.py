@@ -66,10 +66,6 @@ def _cumsum_steps(x: Array) -> Array:
     return torch.cumsum(x, dim=-2) if _torch(x) else np.cumsum(x, axis=-2)
 
 
-def _where(cond: Array, a: Array, b: Array) -> Array:
-    return torch.where(cond, a, b) if _torch(a) else np.where(cond, a, b)
-
-
 def _later_offsets(offsets: Array | None) -> Array | None:
     """``(..., T)`` frame offsets -> ``(..., 1, T-1)`` offsets of the later frame of each step,
     broadcastable to per-step arrays ``(..., N, T-1)``."""
@@ -196,17 +192,18 @@ class VCTEncoding(SinCosEncoding):
     def encode(self, positions: Array, offsets: Array | None = None) -> Array:
         feats = sincos_encode(positions, self.box)
         plain = feats[..., 1:, :] - feats[..., :-1, :]
-        zero = plain[..., 4:6] * 0
+        out = _cat([plain, plain[..., 4:6] * 0], plain)  # real = plain, shift = 0 ...
         if not self.boundary.is_lees_edwards:
-            return _cat([plain, zero], plain)
+            return out
         shift, disp = step_lattice_shifts(positions, self.box, offsets)
-        # sin/cos of the image at t+1 that is continuous with the particle at t (z pair only)
-        cont = sincos_encode(positions[..., :-1, :] + disp, self.box)[..., 4:6]
-        real = cont - feats[..., :-1, 4:6]
-        le_step = (shift[..., 0] != 0)[..., None]
-        real = _where(le_step, real, plain[..., 4:6])
-        moved = _where(le_step, feats[..., 1:, 4:6] - cont, zero)
-        return _cat([plain[..., :4], real, moved], plain)
+        crossed = shift[..., 0] != 0  # (..., N, T-1)
+        if crossed.any():  # ... except at steps that crossed an x face (rare)
+            # sin/cos of the image at t+1 that is continuous with the particle at t
+            image = positions[..., :-1, :][crossed] + disp[crossed]
+            cont = sincos_encode(image, self.box)[..., 4:6]
+            out[..., 4:6][crossed] = cont - feats[..., :-1, 4:6][crossed]
+            out[..., 6:8][crossed] = feats[..., 1:, 4:6][crossed] - cont
+        return out
 
     def combined(self, deltas: Array) -> Array:
         return _cat([deltas[..., :4], deltas[..., 4:6] + deltas[..., 6:8]], deltas)

@@ -1,0 +1,268 @@
+"""One experiment: resolve the data, train, test out of sample beside the baselines, report.
+
+:func:`run_experiment` does the work of ``python -m gripdem.run`` for one composed config and
+one output directory. Everything it writes goes under that directory (Hydra does not change
+the working directory):
+
+    tensorboard/        event files: scalars, HParams (hp/ metrics), figures as images
+    checkpoints/        best.ckpt (lowest val/rmse), last.ckpt
+    predictions.h5      test windows: prediction, truth, baselines (gripdem.predictions)
+    figures/*.png       the paper's figures (gripdem.plots)
+    trajectories/*.xyz  predicted and true trajectories for OVITO / ParaView
+    metrics.json        final metrics, baselines, timings, data summary
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import numpy as np
+from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
+from lightning.pytorch.loggers import TensorBoardLogger
+from omegaconf import DictConfig, OmegaConf
+
+from gripdem.config_schema import check_combination
+from gripdem.data.cache import ensure_scene_dataset
+from gripdem.data.datamodule import TrajectoryDataModule
+from gripdem.data.h5io import atomic_write_text
+from gripdem.models.baselines import BASELINES
+from gripdem.models.module import TrajectoryModule
+from gripdem.predictions import Predictions, write_predictions
+
+log = logging.getLogger(__name__)
+
+HP_METRICS = ("hp/val_rmse_best", "hp/test_rmse", "hp/test_rmse_cv_baseline")
+
+
+def plain(node: Any) -> Any:
+    """A config node as plain Python values (enums as their names)."""
+    if isinstance(node, DictConfig):
+        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
+    return node
+
+
+def resolve_data_path(cfg: DictConfig) -> Path:
+    """``data.path`` if given, else the built-in scene dataset (generated once, cached)."""
+    if cfg.data.path is not None:
+        path = Path(cfg.data.path).expanduser()
+        if not path.exists():
+            raise FileNotFoundError(f"data.path={cfg.data.path}: no such file")
+        return path
+    backend = cfg.get("generator_backend", "numba")
+    return ensure_scene_dataset(
+        plain(cfg.scene), plain(cfg.preset), seed=cfg.data_seed, backend=backend
+    )
+
+
+def build_datamodule(cfg: DictConfig, path: Path) -> TrajectoryDataModule:
+    dm = TrajectoryDataModule.from_config(plain(cfg.data), plain(cfg.split), path=str(path))
+    dm.setup("fit")
+    return dm
+
+
+def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
+    meta = dm.meta
+    model_cfg = plain(cfg.model)
+    scene = {
+        **{
+            k: (v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in meta.boundary.to_attrs().items()
+        },
+        "diameter": meta.diameter,
+    }
+    return TrajectoryModule(
+        scene=scene,
+        normalizer=dm.normalizer.to_dict(),
+        encoding=model_cfg["encoding"],
+        horizon=dm.split.horizon,
+        decoder_mode=model_cfg["decoder_mode"],
+        vct_shift=model_cfg["vct_shift"],
+        residual_base=model_cfg["residual_base"],
+        encoder=model_cfg["encoder"],
+        hidden=model_cfg["hidden"],
+        layers=model_cfg["layers"],
+        n_heads=model_cfg["n_heads"],
+        decoder_dropout=model_cfg["decoder_dropout"],
+        lr=model_cfg["lr"],
+        weight_decay=model_cfg["weight_decay"],
+        n_particles=meta.n_particles,
+        graph_cutoff=float(cfg.data.graph_cutoff),
+    )
+
+
+def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
+    """Flat scalar hyperparameters for TensorBoard's HParams tab."""
+    summary = dm.summary()
+    model = plain(cfg.model)
+    return {
+        "scene": cfg.scene.name,
+        "boundary": summary["boundary"],
+        "split": cfg.split.name,
+        "model": model["name"],
+        "decoder_mode": model["decoder_mode"],
+        "vct_shift": model["vct_shift"],
+        "encoding": summary["encoding"],
+        "protocol": summary.get("protocol", cfg.data.protocol.value),
+        "in_sample": bool(dm.in_sample),
+        "history_len": int(dm.plan.history_len),
+        "horizon": int(dm.split.horizon),
+        "n_particles": int(summary["n_particles"]),
+        "channels": int(model["encoder"]["channels"]),
+        "trainable_graph": model["encoder"]["trainable_graph"],
+        "hidden": int(model["hidden"]),
+        "n_heads": int(model["n_heads"]),
+        "lr": float(model["lr"]),
+        "graph_cutoff_d": float(cfg.data.graph_cutoff),
+        "seed": int(cfg.seed),
+    }
+
+
+def build_trainer(cfg: DictConfig, out_dir: Path, logger: TensorBoardLogger) -> L.Trainer:
+    callbacks_cfg = plain(cfg.callbacks) or {}
+    ckpt = callbacks_cfg.get("checkpoint", {})
+    callbacks = [
+        ModelCheckpoint(
+            dirpath=out_dir / "checkpoints",
+            filename="best",
+            monitor=ckpt.get("monitor", "val/rmse"),
+            mode=ckpt.get("mode", "min"),
+            save_last=ckpt.get("save_last", True),
+            save_top_k=ckpt.get("save_top_k", 1),
+        )
+    ]
+    early = callbacks_cfg.get("early_stopping", {})
+    if early.get("enabled", False):
+        callbacks.append(
+            EarlyStopping(monitor=early["monitor"], mode=early["mode"], patience=early["patience"])
+        )
+    return L.Trainer(
+        **plain(cfg.trainer),
+        logger=logger,
+        callbacks=callbacks,
+        default_root_dir=str(out_dir),
+    )
+
+
+def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict) -> Predictions:
+    meta = dm.meta
+    return Predictions(
+        pred_positions=results["pred"].numpy(),
+        true_positions=results["true"].numpy(),
+        last_positions=results["last"].numpy(),
+        times=results["times"].numpy(),
+        boundary=meta.boundary,
+        radius=meta.radius,
+        frame_interval=meta.frame_interval,
+        in_sample=bool(dm.in_sample),
+        protocol=str(dm.plan.protocol),
+        sim_index=results["sim_index"].numpy(),
+        window_start=results["window_start"].numpy(),
+        baselines={name: results[name].numpy() for name in BASELINES},
+        body_force_amplitude=meta.body_force_amplitude,
+        info=info,
+    )
+
+
+def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) -> str:
+    """Model vs baselines on the test windows, as a Markdown table."""
+    label = "test (IN-SAMPLE: trained on these windows)" if in_sample else "test (out of sample)"
+    rows = [f"| {label} | RMSE (m) | RMSE / d |", "|---|---|---|"]
+    for name, key in [("model", "test/rmse")] + [(b, f"test/rmse_{b}") for b in BASELINES]:
+        value = metrics.get(key, math.nan)
+        rows.append(f"| {name} | {value:.4g} | {value / diameter:.4g} |")
+    return "\n".join(rows)
+
+
+def route_lightning_logs() -> None:
+    """Let Lightning's log lines reach Hydra's handlers (console and the job's log file) once,
+    instead of through Lightning's own console handler as well."""
+    for name in ("lightning.pytorch", "lightning.fabric"):
+        logger = logging.getLogger(name)
+        logger.handlers.clear()
+        logger.propagate = True
+
+
+def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
+    """Train and test one configuration; returns the metrics written to ``metrics.json``."""
+    out_dir = Path(out_dir)
+    route_lightning_logs()
+    check_combination(cfg)
+    L.seed_everything(int(cfg.seed), workers=True)
+    data_path = resolve_data_path(cfg)
+    dm = build_datamodule(cfg, data_path)
+    model = build_model(cfg, dm)
+    logger = TensorBoardLogger(**plain(cfg.logger))
+    hp = hparams(cfg, dm)
+    logger.log_hyperparams(hp, metrics={key: math.nan for key in HP_METRICS})
+    trainer = build_trainer(cfg, out_dir, logger)
+    resume = out_dir / "checkpoints" / "last.ckpt"
+    ckpt_path = str(resume) if cfg.resume and resume.exists() else None
+    if cfg.resume and ckpt_path is None:
+        log.warning("resume=true but %s does not exist: starting from scratch", resume)
+    started = time.perf_counter()
+    trainer.fit(model, dm, ckpt_path=ckpt_path)
+    train_seconds = time.perf_counter() - started
+    if not trainer.is_global_zero:
+        return {}
+    best = trainer.checkpoint_callback.best_model_path or None
+    test_trainer = L.Trainer(
+        accelerator=cfg.trainer.accelerator if cfg.trainer.get("strategy") is None else "cpu",
+        devices=1,
+        logger=logger,
+        enable_progress_bar=False,
+        enable_checkpointing=False,
+    )
+    test_trainer.test(model, dm, ckpt_path=best, verbose=False)
+    results = model.test_results
+    metrics = dict(results["metrics"])
+    best_score = trainer.checkpoint_callback.best_model_score
+    metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
+    metrics["train_seconds"] = train_seconds
+    metrics["epochs"] = trainer.current_epoch
+    metrics["steps"] = trainer.global_step
+    hp_values = {
+        "hp/val_rmse_best": metrics["val/rmse_best"],
+        "hp/test_rmse": metrics["test/rmse"],
+        "hp/test_rmse_cv_baseline": metrics["test/rmse_constant_velocity"],
+    }
+    logger.log_metrics(hp_values, step=trainer.global_step)
+    metrics.update(hp_values)
+    report = {
+        "metrics": metrics,
+        "in_sample": bool(dm.in_sample),
+        "hparams": hp,
+        "data": dm.summary(),
+        "best_checkpoint": best,
+        "config": plain(cfg),
+    }
+    write_outputs(cfg, out_dir, results, dm, hp, logger, trainer.global_step)
+    atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
+    logger.finalize("success")
+    print(result_table(metrics, dm.meta.diameter, dm.in_sample))
+    print(f"outputs: {out_dir}")
+    return report
+
+
+def write_outputs(cfg, out_dir: Path, results, dm, hp, logger, step: int) -> None:
+    """predictions.h5, figures (PNG + TensorBoard images) and XYZ trajectories."""
+    outputs = plain(cfg.outputs)
+    predictions = to_predictions(results, dm, hp)
+    if outputs["predictions"]:
+        write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
+    if outputs["figures"]:
+        from gripdem.plots import make_run_figures
+
+        make_run_figures(predictions, out_dir / "figures", writer=logger.experiment, step=step)
+    if outputs["export_xyz"]:
+        from gripdem.export import export_extxyz
+
+        count = outputs["export_windows"]
+        n = predictions.n_windows if count is None else min(count, predictions.n_windows)
+        windows = list(range(n))
+        export_extxyz(predictions, out_dir / "trajectories", windows=windows, overwrite=True)

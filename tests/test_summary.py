@@ -1,0 +1,135 @@
+"""Sweep summary: jobs laid out as a Hydra multirun writes them, one table in Markdown and CSV."""
+
+import csv
+import io
+import json
+import subprocess
+import sys
+
+import pytest
+
+from gripdem.summary import collect, main, parse_overrides, table, write_summary
+
+
+def make_job(root, number, overrides, metrics=None, config=None):
+    job = root / str(number)
+    (job / ".hydra").mkdir(parents=True)
+    if overrides is not None:
+        (job / ".hydra" / "overrides.yaml").write_text("".join(f"- {o}\n" for o in overrides))
+    if config is not None:
+        (job / ".hydra" / "config.yaml").write_text(config)
+    if metrics is not None:
+        (job / "metrics.json").write_text(json.dumps(metrics))
+    return job
+
+
+def metrics_of(rmse, cv, time_s):
+    return {
+        "test/rmse": rmse,
+        "test/rmse_over_d": rmse / 2.5e-6,
+        "test/rmse_step/001": 0.1 * rmse,
+        "baseline/constant_velocity/rmse": cv,
+        "train": {"time_s": time_s},
+        "hp": {"ignored": 1.0},
+    }
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    root = tmp_path / "multirun" / "2025-01-31" / "12-00-00"
+    (root).mkdir(parents=True)
+    (root / "multirun.yaml").write_text("hydra: {}\n")
+    make_job(root, 0, ["split=190-10", "model=vct", "scene=lebc"], metrics_of(1e-8, 2e-8, 12.5))
+    make_job(root, 1, ["split=100-100", "model=vct", "scene=lebc"], metrics_of(3e-7, 5e-7, 30.0))
+    make_job(
+        root,
+        10,
+        ["split=100-100", "model=pct", "+trainer.max_steps=5", "scene=lebc"],
+        metrics_of(2e-7, 5e-7, 31.0),
+    )
+    make_job(root, 2, ["split=190-10", "model=pct", "scene=lebc"], None)  # failed job
+    return root
+
+
+def test_table_has_varying_overrides_and_key_metrics(sweep):
+    jobs = collect(sweep)
+    assert [j.name for j in jobs] == ["0", "1", "2", "10"]
+    header, rows = table(jobs)
+    assert header == [
+        "job",
+        "split",
+        "model",
+        "trainer.max_steps",
+        "status",
+        "test/rmse",
+        "test/rmse_over_d",
+        "baseline/constant_velocity/rmse",
+        "train/time_s",
+    ]
+    assert rows[0][:5] == ["0", "190-10", "vct", None, "ok"]
+    assert rows[2][4] == "no metrics.json" and rows[2][5:] == [None] * 4
+    assert rows[3][3] == "5" and rows[3][5] == 2e-7 and rows[3][-1] == 31.0
+
+
+def test_written_markdown_and_csv(sweep):
+    md, csv_path, text = write_summary(sweep)
+    assert md == sweep / "summary.md" and md.read_text() == text
+    lines = text.splitlines()
+    assert lines[0].startswith("| job | split | model |") and lines[1].startswith("|---|")
+    assert "| 1 | 100-100 | vct |  | ok | 3e-07 | 0.12 | 5e-07 | 30 |" in lines
+    rows = list(csv.reader(io.StringIO(csv_path.read_text())))
+    assert rows[0][0] == "job" and len(rows) == 5
+    assert float(rows[1][rows[0].index("test/rmse")]) == 1e-8  # full precision in CSV
+    # re-running replaces the old summary (it is not a job)
+    write_summary(sweep)
+    assert len(collect(sweep)) == 4
+
+
+def test_config_yaml_is_used_without_overrides_and_single_jobs_show_everything(tmp_path):
+    make_job(
+        tmp_path,
+        0,
+        None,
+        {"test/rmse": 1.0},
+        config="model:\n  name: grip\n  hidden: 64\nsplit: 190-10\n",
+    )
+    make_job(
+        tmp_path,
+        1,
+        None,
+        {"test/rmse": 2.0},
+        config="model:\n  name: grip\n  hidden: 128\nsplit: 190-10\n",
+    )
+    header, rows = table(collect(tmp_path))
+    assert header == ["job", "model/hidden", "status", "test/rmse"]
+    assert [r[1] for r in rows] == [64, 128]
+    single = tmp_path / "single"
+    make_job(single, 0, ["model=pct", "split=150-50"], {"test/rmse": 1.0})
+    assert table(collect(single))[0] == ["job", "model", "split", "status", "test/rmse"]
+
+
+def test_override_parsing():
+    assert parse_overrides(["a=1", "+b.c=x=y", "++d=2", "~e"]) == {
+        "a": "1",
+        "b.c": "x=y",
+        "d": "2",
+        "e": "<deleted>",
+    }
+
+
+def test_cli(sweep, tmp_path, capsys):
+    assert main([str(sweep), "--metrics", "test/rmse"]) == 0
+    out = capsys.readouterr().out
+    assert "| job | split | model | trainer.max_steps | status | test/rmse |" in out
+    assert main([str(tmp_path / "nope")]) == 2
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main([str(empty)]) == 2
+    assert "no Hydra job folders" in capsys.readouterr().err
+    done = subprocess.run(
+        [sys.executable, "-m", "gripdem.summary", str(sweep)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert "summary.csv" in done.stdout

@@ -265,3 +265,41 @@ def test_collate_offsets_graph_indices():
     batch = collate_windows([sample, sample, sample])
     assert batch.edge_index.max() == 5 and batch.edge_ptr.tolist() == [0, 4, 8, 12]
     assert batch.edge_index[:, 4:8].tolist() == (graph.edge_index + 2).tolist()
+
+
+@pytest.mark.parametrize(
+    "scene,encoding", [("pbc", "sincos"), ("lebc", "vct"), ("lebc", "unwrapped")]
+)
+def test_datamodule_on_the_tiny_dem_datasets(scene, encoding, request):
+    path = request.getfixturevalue(f"tiny_{scene}_path")
+    boundary = "periodic" if scene == "pbc" else "lees_edwards"
+    dm = TrajectoryDataModule(
+        path,
+        split="20-5",
+        history_len=10,
+        encoding=encoding,
+        batch_size=2,
+        expect_boundary=boundary,
+    )
+    dm.setup("fit")
+    summary = dm.summary()
+    assert summary["protocol"] == "sims" and not summary["in_sample"]
+    assert summary["n_windows_train"] > 0 and summary["n_windows_test"] > 0
+    enc = make_encoding(encoding, dm.meta.boundary)
+    for batch in dm.test_dataloader():
+        n = dm.meta.n_particles
+        assert batch.inputs.shape[1:] == (n, 10, enc.n_channels)
+        assert torch.isfinite(batch.inputs).all() and torch.isfinite(batch.target_deltas).all()
+        # the first step's times are absolute (after the spin-up), offsets from those times
+        assert (batch.times[:, 0] > 0).all()
+        np.testing.assert_array_equal(batch.offsets, dm.meta.boundary.offset(batch.times))
+        deltas = dm.normalizer.denormalize(batch.target_deltas.double())
+        decoded = enc.decode(batch.last_positions, deltas, batch.target_offsets)
+        err = minimum_image(
+            (decoded - batch.target_positions).numpy(),
+            dm.meta.box,
+            batch.target_offsets[:, None, :].numpy(),
+        )
+        assert np.abs(err).max() < 1e-5 * dm.meta.diameter
+        neighbours = batch.edge_index.shape[1] / (batch.batch_size * n) - 1
+        assert 20 < neighbours < n  # ~100 at phi = 0.5 and D = 3 d, fewer in a tiny box

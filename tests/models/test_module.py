@@ -1,0 +1,181 @@
+"""The LightningModule: shapes, gradients, learning, equivariance, exact LE shift."""
+
+import numpy as np
+import pytest
+import torch
+
+from gripdem.boundary import Boundary, Box, LeesEdwards, wrap_positions
+from gripdem.data.datamodule import TrajectoryDataModule
+from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.models.module import TrajectoryModule
+
+MODES = [
+    ("grip", "sincos", "learned"),
+    ("pct", "sincos", "learned"),
+    ("pct", "unwrapped", "learned"),
+    ("vct", "vct", "learned"),
+    ("vct", "vct", "exact"),
+]
+
+
+def make_module(dm: TrajectoryDataModule, mode: str, encoding: str, shift: str, **kw):
+    meta = dm.meta
+    scene = {
+        k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in meta.boundary.to_attrs().items()
+    }
+    scene["diameter"] = meta.diameter
+    args = dict(
+        scene=scene,
+        normalizer=dm.normalizer.to_dict(),
+        encoding=encoding,
+        horizon=dm.split.horizon,
+        decoder_mode=mode,
+        vct_shift=shift,
+        encoder={"channels": 8, "n_blocks": 2},
+        hidden=16,
+        n_heads=2,
+        lr=3e-3,
+        n_particles=meta.n_particles,
+    )
+    args.update(kw)
+    return TrajectoryModule(**args)
+
+
+def datamodule(path, encoding, split="6-4", history_len=4, batch_size=1, **kw):
+    dm = TrajectoryDataModule(
+        path, split=split, encoding=encoding, history_len=history_len, batch_size=batch_size, **kw
+    )
+    dm.setup("fit")
+    return dm
+
+
+@pytest.mark.parametrize("scene", ["pbc", "lebc"])
+@pytest.mark.parametrize(("mode", "encoding", "shift"), MODES)
+def test_shapes_and_decoded_positions_inside_the_box(request, scene, mode, encoding, shift):
+    path = request.getfixturevalue(f"tiny_{scene}_path")
+    dm = datamodule(path, encoding)
+    model = make_module(dm, mode, encoding, shift).eval()
+    batch = next(iter(dm.val_dataloader()))
+    with torch.no_grad():
+        pred = model(batch.inputs, batch.last_positions, model.graph(batch))
+        positions = model.decode(pred, batch)
+    b, n = batch.inputs.shape[:2]
+    assert pred.shape == (b, n, 4, dm.encoding.n_channels)
+    assert positions.shape == (b, 4, n, 3) and positions.dtype == torch.float64
+    half = torch.tensor(dm.meta.box.lengths) / 2
+    assert torch.all(positions >= -half) and torch.all(positions < half)
+
+
+def test_untrained_grip_is_constant_velocity_along_a_chord(tiny_pbc_path):
+    dm = datamodule(tiny_pbc_path, "sincos")
+    model = make_module(dm, "grip", "sincos", "learned").eval()
+    batch = next(iter(dm.val_dataloader()))
+    with torch.no_grad():
+        pred = model(batch.inputs, batch.last_positions, model.graph(batch))
+    torch.testing.assert_close(pred, batch.inputs[:, :, -1:].expand_as(pred))
+
+
+@pytest.mark.parametrize(("mode", "encoding", "shift"), MODES)
+def test_gradients_reach_every_parameter(tiny_lebc_path, mode, encoding, shift):
+    dm = datamodule(tiny_lebc_path, encoding)
+    model = make_module(dm, mode, encoding, shift)
+    for p in model.parameters():  # move the zero-initialised heads off zero
+        if p.dim() > 0 and torch.all(p == 0):
+            torch.nn.init.normal_(p, std=0.1)
+    batch = next(iter(dm.train_dataloader()))
+    loss = model._loss(model(batch.inputs, batch.last_positions, model.graph(batch)), batch)
+    loss.backward()
+    missing = [n for n, p in model.named_parameters() if p.grad is None or not p.grad.any()]
+    assert missing == []
+
+
+@pytest.mark.parametrize(("mode", "encoding", "shift"), MODES)
+def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift):
+    """Learning works: 200 Adam steps on one window cut the loss at least 20-fold."""
+    torch.manual_seed(0)
+    dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=1.5)
+    model = make_module(
+        dm, mode, encoding, shift, encoder={"channels": 16, "n_blocks": 1}, hidden=32
+    )
+    batch = next(iter(dm.train_dataloader()))
+    opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+    losses = []
+    for _ in range(200):
+        opt.zero_grad()
+        loss = model._loss(model(batch.inputs, batch.last_positions, model.graph(batch)), batch)
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert losses[-1] < 0.05 * losses[0], (losses[0], losses[-1])
+
+
+@pytest.mark.parametrize("trainable_graph", ["edge", "none"])
+def test_permuting_particles_permutes_predictions(tiny_lebc_path, trainable_graph):
+    dm = datamodule(tiny_lebc_path, "sincos")
+    model = make_module(
+        dm, "grip", "sincos", "learned", encoder={"channels": 8, "trainable_graph": trainable_graph}
+    )
+    for p in model.parameters():
+        if p.dim() > 0 and torch.all(p == 0):
+            torch.nn.init.normal_(p, std=0.1)
+    model.eval()
+    batch = next(iter(dm.val_dataloader()))
+    b, n = batch.inputs.shape[:2]
+    perm = torch.randperm(n, generator=torch.Generator().manual_seed(1))
+    new_label = torch.argsort(perm)  # old particle p is new particle new_label[p]
+    node_map = (new_label.repeat(b) + torch.arange(b).repeat_interleave(n) * n).long()
+    permuted = type(batch)(
+        **{
+            **batch.__dict__,
+            "inputs": batch.inputs[:, perm],
+            "input_positions": batch.input_positions[:, perm],
+            "edge_index": node_map[batch.edge_index],
+        }
+    )
+    with torch.no_grad():
+        out = model(batch.inputs, batch.last_positions, model.graph(batch))
+        out_perm = model(permuted.inputs, permuted.last_positions, model.graph(permuted))
+    torch.testing.assert_close(out_perm, out[:, perm], atol=1e-5, rtol=1e-4)
+
+
+def shear_with_crossings(tmp_path) -> str:
+    """Ballistic x motion under affine shear: many particles cross the LE faces."""
+    rng = np.random.default_rng(0)
+    box = Box(1e-5, 1.2e-5, 0.9e-5)
+    le = LeesEdwards(2000.0, sign=1, time_origin=0.0)
+    n, frames, dt = 40, 30, 5e-5
+    times = 3e-3 + dt * np.arange(frames)
+    x0 = (rng.random(n) - 0.5) * box.lx
+    vx = rng.normal(0, 0.15, n) * box.lx / (frames * dt) * 4
+    cont = np.zeros((frames, n, 3))
+    cont[:, :, 1] = (rng.random(n) - 0.5) * box.ly
+    z = (rng.random(n) - 0.5) * box.lz
+    for t in range(frames):
+        cont[t, :, 0] = x0 + vx * dt * t
+        cont[t, :, 2] = z
+        z = z + le.shear_rate * (x0 + vx * dt * (t + 0.5)) * dt
+    offsets = le.offset(box, times)
+    wrapped = np.stack([wrap_positions(cont[t], box, offsets[t]) for t in range(frames)])
+    data = TrajectoryData(wrapped[None], times[None], Boundary(box, le), radius=2e-7)
+    return str(write_dataset(tmp_path / "shear.h5", data))
+
+
+def test_vct_exact_reproduces_the_le_jumps_of_affine_shear(tmp_path):
+    dm = datamodule(
+        shear_with_crossings(tmp_path), "vct", split="20-8", history_len=3, protocol="paper"
+    )
+    exact = make_module(dm, "vct", "vct", "exact")
+    learned = make_module(dm, "vct", "vct", "learned")
+    crossers, worst_learned = 0, 0.0
+    for batch in dm.test_dataloader():
+        crossers += int(batch.crossing_mask.sum())
+        truth = batch.target_positions.transpose(1, 2)
+        deltas = batch.target_deltas.double().clone()
+        # the real channels are what the model predicts; the shift channels are left at zero
+        deltas[..., 6:8] = torch.as_tensor(dm.normalizer.normalize(np.zeros(8)))[6:8]
+        torch.testing.assert_close(exact.decode(deltas, batch), truth, atol=1e-12, rtol=0)
+        worst_learned = max(
+            worst_learned, float((learned.decode(deltas, batch) - truth).abs().max())
+        )
+    assert crossers > 0
+    assert worst_learned > 1e-7  # without the shift, the learned decoder misses the jumps

@@ -1,0 +1,74 @@
+"""Generate, validate and write one scene dataset (used by ``gripdem.simulate`` and the cache)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from gripdem.data.schema import write_dataset
+from gripdem.dem.params import GeneratorConfig
+from gripdem.dem.scenes import generate
+from gripdem.dem.validation import validate_trajectories, write_report
+
+log = logging.getLogger(__name__)
+
+
+class ValidationFailed(RuntimeError):
+    """The generated data failed a plausibility check; the report says which."""
+
+    def __init__(self, report: dict[str, Any], report_path: Path):
+        failed = [k for k, ok in report.get("checks", {}).items() if not ok]
+        super().__init__(
+            f"generated data failed validation checks {failed}; nothing written "
+            f"but the report {report_path}"
+        )
+        self.report = report
+
+
+def generate_dataset(
+    config: GeneratorConfig,
+    path: str | os.PathLike,
+    *,
+    overwrite: bool = False,
+    progress: bool = True,
+    workers: int | None = None,
+    device: str = "cpu",
+    strict: bool = True,
+) -> tuple[Path, dict[str, Any]]:
+    """Generate ``config`` in memory, validate it, write the HDF5 atomically and the report
+    (``<stem>.validation.json``, ``<stem>.profile.png``) next to it.
+
+    With ``strict`` a failed check raises :class:`ValidationFailed` and no dataset is written.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: exists; refusing to overwrite it (pass overwrite=true)")
+    start = time.perf_counter()
+    data, results = generate(config, progress=progress, workers=workers, device=device)
+    generation_time = time.perf_counter() - start
+    report = validate_trajectories(
+        data,
+        extra={
+            "scene": config.scene.name,
+            "preset": config.preset.name,
+            "max_overlap_all_steps_d": max(r.max_overlap for r in results),
+            "generation_wall_time_s": generation_time,
+            "simulation_wall_time_s": [r.wall_time for r in results],
+            "dem_steps_per_sim": results[0].steps,
+            "dt": config.dt,
+            "neighbour_rebuilds_per_sim": [r.rebuilds for r in results],
+        },
+    )
+    title = (
+        f"{config.scene.name} / {config.preset.name}: {config.sims} x {config.preset.frames} frames"
+    )
+    if strict and not report["passed"]:
+        json_path, _ = write_report(report, path, title)
+        raise ValidationFailed(report, json_path)
+    write_dataset(path, data, overwrite=overwrite)
+    write_report(report, path, title)
+    log.info("wrote %s (%.1f s)", path, generation_time)
+    return path, report

@@ -133,6 +133,7 @@ class ConfigSchema:
     logger: dict[str, Any] = field(default_factory=dict)
     callbacks: Any = None
     seed: int = 0
+    torch_threads: Optional[int] = None
     data_seed: int = 0
     resume: bool = False
     optimized_metric: str = "val/rmse_best"

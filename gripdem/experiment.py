@@ -23,6 +23,7 @@ from typing import Any
 
 import lightning as L
 import numpy as np
+import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
@@ -192,6 +193,8 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     """Train and test one configuration; returns the metrics written to ``metrics.json``."""
     out_dir = Path(out_dir)
     route_lightning_logs()
+    if cfg.torch_threads:
+        torch.set_num_threads(int(cfg.torch_threads))
     check_combination(cfg)
     L.seed_everything(int(cfg.seed), workers=True)
     data_path = resolve_data_path(cfg)

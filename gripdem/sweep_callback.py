@@ -1,0 +1,30 @@
+"""Hydra callback: after a multirun, one summary table across its jobs (Markdown and CSV).
+
+Registered in ``conf/config.yaml`` under ``hydra.callbacks``; the table itself is built by
+:func:`gripdem.summary.write_summary` (also ``python -m gripdem.summary SWEEP_DIR``).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig
+
+from gripdem.summary import write_summary
+
+log = logging.getLogger(__name__)
+
+
+class SweepSummary(Callback):
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        sweep_dir = Path(config.hydra.sweep.dir)
+        try:
+            md, csv_path, markdown = write_summary(sweep_dir)
+        except FileNotFoundError as exc:  # every job failed before writing anything
+            log.warning("no sweep summary: %s", exc)
+            return
+        print(markdown)
+        print(f"sweep summary: {md} and {csv_path}")

@@ -52,6 +52,16 @@ FORMAT_VERSION = 1
 PROTOCOLS = ("sims", "time", "paper")
 
 
+def _numpy(values) -> np.ndarray:
+    return np.asarray(values.detach().cpu() if hasattr(values, "detach") else values)
+
+
+def _float_array(values) -> np.ndarray:
+    """float32 stays float32 (a model's own precision), everything else becomes float64."""
+    arr = _numpy(values)
+    return arr if arr.dtype == np.float32 else arr.astype(np.float64)
+
+
 @dataclass
 class Predictions:
     """Predictions of one run on its evaluation windows (see the module docstring for shapes).
@@ -76,6 +86,14 @@ class Predictions:
     info: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        # torch tensors (a LightningModule's outputs) become numpy; a float32 prediction stays
+        self.pred_positions = _float_array(self.pred_positions)
+        self.baselines = {k: _float_array(v) for k, v in self.baselines.items()}
+        for name in ("true_positions", "last_positions", "times"):
+            setattr(self, name, np.asarray(_numpy(getattr(self, name)), dtype=np.float64))
+        for name in ("sim_index", "window_start"):
+            if getattr(self, name) is not None:
+                setattr(self, name, np.asarray(_numpy(getattr(self, name))))
         if self.frame_interval is None:
             times = np.asarray(self.times, dtype=np.float64)
             if times.ndim != 2 or times.shape[1] < 2:
@@ -200,10 +218,6 @@ def validate(p: Predictions, path=None) -> None:
 # --------------------------------------------------------------------------------------------
 # writing and reading
 # --------------------------------------------------------------------------------------------
-def _float_array(values) -> np.ndarray:
-    """float32 stays float32 (a model's own precision), everything else becomes float64."""
-    arr = np.asarray(values.detach().cpu() if hasattr(values, "detach") else values)
-    return arr if arr.dtype == np.float32 else arr.astype(np.float64)
 
 
 def write_predictions(path: str | os.PathLike, p: Predictions, overwrite: bool = False) -> Path:

@@ -221,3 +221,23 @@ def test_paper_protocol_is_labelled_in_sample_and_short_horizons_need_an_interva
             q.boundary,
             0.05,
         )
+
+
+def test_torch_outputs_are_accepted(tmp_path):
+    torch = pytest.importorskip("torch")
+    p = make_predictions()
+    q = Predictions(
+        torch.tensor(p.pred_positions),
+        torch.tensor(p.true_positions),
+        torch.tensor(p.last_positions),
+        torch.tensor(p.times),
+        p.boundary,
+        p.radius,
+        baselines={"stay": torch.tensor(p.baselines["stay"])},
+        sim_index=torch.arange(3),
+    )
+    assert isinstance(q.true_positions, np.ndarray) and q.pred_positions.dtype == np.float32
+    assert q.sim_index.dtype == np.int64
+    back = read_predictions(write_predictions(tmp_path / "t.h5", q))
+    np.testing.assert_array_equal(back.pred_positions, p.pred_positions)
+    assert evaluate_predictions(back)["rmse"] == evaluate_predictions(p)["rmse"]

@@ -210,7 +210,7 @@ class WindowDataset(Dataset):
     """Windows of one protocol part, as sample dicts for :func:`collate_windows`.
 
     The graph depends only on the last observed frame: it is cached per (simulation, frame)
-    in an LRU bounded by ``graph_cache_mb`` (per worker process).
+    in an LRU bounded by ``graph_cache_mb`` (per worker process; 0 = no cache).
     """
 
     def __init__(
@@ -258,7 +258,7 @@ class WindowDataset(Dataset):
         )
         self._graphs[key] = g
         self._graph_bytes += g.nbytes
-        while self._graph_bytes > self.graph_cache_bytes and len(self._graphs) > 1:
+        while self._graph_bytes > self.graph_cache_bytes and self._graphs:
             _, old = self._graphs.popitem(last=False)
             self._graph_bytes -= old.nbytes
         return g

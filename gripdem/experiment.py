@@ -221,7 +221,9 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         enable_progress_bar=False,
         enable_checkpointing=False,
     )
-    test_trainer.test(model, dm, ckpt_path=best, verbose=False)
+    if best:  # the best validation rollout, not the last epoch
+        model = TrajectoryModule.load_from_checkpoint(best, map_location="cpu")
+    test_trainer.test(model, dm, verbose=False)
     results = model.test_results
     metrics = dict(results["metrics"])
     best_score = trainer.checkpoint_callback.best_model_score
@@ -234,17 +236,21 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         "hp/test_rmse": metrics["test/rmse"],
         "hp/test_rmse_cv_baseline": metrics["test/rmse_constant_velocity"],
     }
-    logger.log_metrics(hp_values, step=trainer.global_step)
     metrics.update(hp_values)
+    predictions = to_predictions(results, dm, hp)
+    metrics.update(physics_metrics(predictions))
+    logger.log_metrics(
+        {k: v for k, v in metrics.items() if k.startswith(("hp/", "test/physics/"))},
+        step=trainer.global_step,
+    )
     report = {
-        "metrics": metrics,
+        **metrics,
         "in_sample": bool(dm.in_sample),
+        "best_checkpoint": best,
         "hparams": hp,
         "data": dm.summary(),
-        "best_checkpoint": best,
-        "config": plain(cfg),
     }
-    write_outputs(cfg, out_dir, results, dm, hp, logger, trainer.global_step)
+    write_outputs(cfg, out_dir, predictions, logger, trainer.global_step)
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
     logger.finalize("success")
     print(result_table(metrics, dm.meta.diameter, dm.in_sample))
@@ -252,10 +258,27 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     return report
 
 
-def write_outputs(cfg, out_dir: Path, results, dm, hp, logger, step: int) -> None:
+def physics_metrics(predictions: Predictions) -> dict[str, float]:
+    """Overlap fraction at the last predicted step (model and truth), velocity-profile error
+    and mean-squared displacement, as ``test/physics/...`` (SPEC §6)."""
+    from gripdem.physics import physics_summary
+
+    p = predictions
+    values = physics_summary(
+        p.pred_positions,
+        p.true_positions,
+        p.last_positions,
+        p.box,
+        p.diameter,
+        p.offsets(),
+        p.offset_increment,
+    )
+    return {f"test/physics/{k}": float(v) for k, v in values.items()}
+
+
+def write_outputs(cfg, out_dir: Path, predictions: Predictions, logger, step: int) -> None:
     """predictions.h5, figures (PNG + TensorBoard images) and XYZ trajectories."""
     outputs = plain(cfg.outputs)
-    predictions = to_predictions(results, dm, hp)
     if outputs["predictions"]:
         write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
     if outputs["figures"]:

@@ -36,17 +36,18 @@ from gripdem.data.h5io import atomic_write_text
 DEFAULT_METRICS = (
     "test/rmse",
     "test/rmse_over_d",
+    "test/rmse_constant_velocity_over_d",
+    "test/rmse_stay_over_d",
+    "test/rmse_mean_flow_over_d",
     "test/rmse_crossers",
-    "test/rmse_others",
+    "test/rmse_constant_velocity_crossers",
     "test/n_crossers",
-    "*baseline*rmse",
-    "*baseline*rmse_over_d",
-    "*val*rmse*best*",
-    "*overlap_fraction*",
-    "*velocity_profile_error*",
-    "*in_sample*",
-    "*time*",
-    "*epoch*",
+    "val/rmse_best",
+    "test/physics/overlap_fraction",
+    "test/physics/overlap_fraction_true",
+    "train_seconds",
+    "epochs",
+    "in_sample",
 )
 EXCLUDE = ("*rmse_step*",)
 

@@ -28,9 +28,9 @@ def metrics_of(rmse, cv, time_s):
         "test/rmse": rmse,
         "test/rmse_over_d": rmse / 2.5e-6,
         "test/rmse_step/001": 0.1 * rmse,
-        "baseline/constant_velocity/rmse": cv,
-        "train": {"time_s": time_s},
-        "hp": {"ignored": 1.0},
+        "test/rmse_constant_velocity_over_d": cv / 2.5e-6,
+        "train_seconds": time_s,
+        "hparams": {"ignored": 1.0},
     }
 
 
@@ -63,8 +63,8 @@ def test_table_has_varying_overrides_and_key_metrics(sweep):
         "status",
         "test/rmse",
         "test/rmse_over_d",
-        "baseline/constant_velocity/rmse",
-        "train/time_s",
+        "test/rmse_constant_velocity_over_d",
+        "train_seconds",
     ]
     assert rows[0][:5] == ["0", "190-10", "vct", None, "ok"]
     assert rows[2][4] == "no metrics.json" and rows[2][5:] == [None] * 4
@@ -76,7 +76,7 @@ def test_written_markdown_and_csv(sweep):
     assert md == sweep / "summary.md" and md.read_text() == text
     lines = text.splitlines()
     assert lines[0].startswith("| job | split | model |") and lines[1].startswith("|---|")
-    assert "| 1 | 100-100 | vct |  | ok | 3e-07 | 0.12 | 5e-07 | 30 |" in lines
+    assert "| 1 | 100-100 | vct |  | ok | 3e-07 | 0.12 | 0.2 | 30 |" in lines
     rows = list(csv.reader(io.StringIO(csv_path.read_text())))
     assert rows[0][0] == "job" and len(rows) == 5
     assert float(rows[1][rows[0].index("test/rmse")]) == 1e-8  # full precision in CSV

@@ -1,0 +1,123 @@
+"""The experiment runner: composition of every config option, and smoke runs end to end."""
+
+import json
+import math
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from gripdem.experiment import HP_METRICS, run_experiment
+from gripdem.run import CONFIG_DIR
+
+GROUPS = {
+    "scene": ["pbc", "lebc"],
+    "preset": ["tiny", "default", "paper"],
+    "split": ["190-10", "180-20", "150-50", "100-100", "custom"],
+    "model": ["grip", "pct", "vct", "vct_exact"],
+    "trainer": ["cpu", "gpu", "ddp"],
+    "experiment": ["smoke", "fast", "paper"],
+    "hparams_search": ["optuna"],
+    "hydra/launcher": ["local_parallel", "slurm"],
+}
+
+
+def compose_run(overrides: list[str], hydra_node: bool = True):
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        return compose("config", overrides=overrides, return_hydra_config=hydra_node)
+
+
+@pytest.mark.parametrize(
+    "override", [f"{group}={option}" for group, options in GROUPS.items() for option in options]
+)
+def test_every_config_option_composes(override):
+    extra = ["split.history=20", "split.horizon=3"] if override == "split=custom" else []
+    cfg = compose_run([override, *extra])
+    assert cfg.split.history > 0 and cfg.split.horizon > 0
+    assert cfg.data.encoding == cfg.model.encoding
+
+
+def test_every_config_file_is_listed_here():
+    conf = Path(CONFIG_DIR)
+    for group, options in GROUPS.items():
+        on_disk = sorted(p.stem for p in (conf / group).glob("*.yaml"))
+        assert on_disk == sorted(options), group
+
+
+def test_custom_split_and_defaults():
+    cfg = compose_run(["split=custom", "split.history=50", "split.horizon=5"])
+    assert cfg.split.name == "50-5"
+    default = compose_run([])
+    assert (default.scene.name, default.split.name, default.model.name) == ("pbc", "190-10", "grip")
+    assert default.data.history_len == 10  # experiment=fast is the default preset
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("model.decoder_mode=gripp", "gripp"),
+        ("split.horizon=ten", "ten"),
+        ("data.protocl=sims", "protocl"),
+        ("model.encoder.trainable_graph=full", "full"),
+        ("data.history_len=1.5", "1.5"),
+    ],
+)
+def test_typos_and_wrong_types_fail_at_composition(override, message):
+    with pytest.raises(ConfigCompositionException) as info:
+        compose_run([override])
+    assert message in str(info.value) + str(info.value.__cause__)
+
+
+def run_smoke(tmp_path, monkeypatch, data_root, overrides):
+    monkeypatch.setenv("GRIPDEM_DATA", str(data_root))
+    out = tmp_path / "run"
+    overrides = ["experiment=smoke", f"logger.save_dir={out}", *overrides]
+    cfg = compose_run(overrides, hydra_node=False)
+    report = run_experiment(cfg, out)
+    return cfg, out, report
+
+
+def hparams_in_events(out: Path) -> tuple[set, set]:
+    """HParams plugin entries and scalar tags found in the run's event files."""
+    plugin, scalars = set(), set()
+    for events in (out / "tensorboard").glob("events.out.tfevents*"):
+        acc = EventAccumulator(str(events))
+        acc.Reload()
+        try:
+            plugin |= set(acc.PluginTagToContent("hparams"))
+        except KeyError:  # this event file holds no HParams summary
+            pass
+        scalars |= set(acc.Tags()["scalars"])
+    return plugin, scalars
+
+
+@pytest.mark.parametrize("scene", ["pbc", "lebc"])
+@pytest.mark.parametrize("model", ["grip", "pct", "vct", "vct_exact"])
+def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request, scene, model):
+    request.getfixturevalue(f"tiny_{scene}_path")  # generated once per session
+    cfg, out, report = run_smoke(
+        tmp_path, monkeypatch, gripdem_data_root, [f"scene={scene}", f"model={model}"]
+    )
+    metrics = json.loads((out / "metrics.json").read_text())
+    for key in ("test/rmse", "test/rmse_constant_velocity", "val/rmse_best", *HP_METRICS):
+        assert math.isfinite(metrics[key]), key
+    plugin, scalars = hparams_in_events(out)
+    assert {"_hparams_/experiment", "_hparams_/session_start_info"} <= plugin
+    assert set(HP_METRICS) <= scalars
+    assert {"train/loss", "val/rmse", "test/rmse"} <= scalars
+    for name in ("rmse_per_step", "crossers", "velocity_profile", "parity_z", "pair_distances"):
+        assert (out / "figures" / f"{name}.png").stat().st_size > 5000
+    assert (out / "checkpoints" / "best.ckpt").exists()
+    assert (out / "trajectories" / "window000_pred.xyz").exists()
+    with h5py.File(out / "predictions.h5") as h5:
+        pred = h5["pred_positions"][()]
+        box = h5.attrs["box"]
+        assert h5.attrs["boundary"] == ("periodic" if scene == "pbc" else "lees_edwards")
+        assert pred.shape == h5["true_positions"].shape
+    assert np.all(pred >= -box / 2) and np.all(pred < box / 2)
+    assert report["in_sample"] is False
+    assert 0.0 <= metrics["test/physics/overlap_fraction"] <= 1.0

@@ -213,6 +213,8 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     train_seconds = time.perf_counter() - started
     if not trainer.is_global_zero:
         return {}
+    if torch.distributed.is_available() and torch.distributed.is_initialized():
+        torch.distributed.destroy_process_group()  # test on one process, all windows at once
     best = trainer.checkpoint_callback.best_model_path or None
     test_trainer = L.Trainer(
         accelerator=cfg.trainer.accelerator if cfg.trainer.get("strategy") is None else "cpu",

@@ -32,7 +32,7 @@ def main(cfg: DictConfig) -> float:
     report = run_experiment(cfg, out_dir)
     if not report:  # a non-zero DDP rank
         return math.nan
-    metrics = report["metrics"]
+    metrics = {k: v for k, v in report.items() if isinstance(v, float)}
     if cfg.optimized_metric not in metrics:
         raise KeyError(
             f"optimized_metric={cfg.optimized_metric!r} is not among the run's metrics; "

@@ -323,6 +323,12 @@ class Normalizer:
             raise ValueError("cannot fit a normaliser on no data")
         std = np.sqrt(m2 / n)
         std = np.where(std > 0, std, 1.0)
+        if encoding == VCTEncoding.name:
+            # The LE shift channels are zero except at rare crossings: their own spread would
+            # blow a crossing up to hundreds of standard deviations. Scale them like the real
+            # z channels (same units), centred at zero.
+            mean[6:8] = 0.0
+            std[6:8] = std[4:6]
         return cls(tuple(mean), tuple(std), encoding, n)
 
     def _stats(self, like: Array) -> tuple[Array, Array]:

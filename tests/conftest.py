@@ -29,6 +29,12 @@ def compose_simulate(overrides: list[str]) -> DictConfig:
         return compose(config_name="simulate", overrides=overrides)
 
 
+@pytest.fixture
+def compose_simulate_config():
+    """``compose_simulate_config(overrides) -> DictConfig`` of ``gripdem.simulate``."""
+    return compose_simulate
+
+
 @pytest.fixture(scope="session")
 def gripdem_data_root(tmp_path_factory) -> Path:
     """Session cache directory for generated datasets."""
@@ -44,11 +50,11 @@ def _tiny_dataset(scene: str, root: Path) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_pbc_path(gripdem_data_root) -> Path:
-    """Tiny periodic dataset (3 simulations x 41 frames x 256 particles), validated."""
+    """Tiny periodic dataset (3 simulations x 61 frames x 400 particles), validated."""
     return _tiny_dataset("pbc", gripdem_data_root)
 
 
 @pytest.fixture(scope="session")
 def tiny_lebc_path(gripdem_data_root) -> Path:
-    """Tiny Lees-Edwards dataset (3 simulations x 41 frames x 256 particles), validated."""
+    """Tiny Lees-Edwards dataset (3 simulations x 61 frames x 400 particles), validated."""
     return _tiny_dataset("lebc", gripdem_data_root)

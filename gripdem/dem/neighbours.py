@@ -9,7 +9,8 @@ Building: a numba cell list proposes candidate pairs (cells at least one cut-off
 the cells across an x face the z range is taken around ``z_i -/+ delta``, so the sliding
 images are searched where they are), then :func:`gripdem.boundary.lattice_shift` picks the
 minimum image and the cut-off filters. Boxes narrower than three cut-offs fall back to all
-pairs. Rebuild rule: :func:`needs_rebuild`.
+pairs. The rebuild rule (SPEC §9: ``|delta change| + 2 * largest displacement > skin``) is
+checked inside the kernels' step loops.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from gripdem.boundary import Box, apply_lattice_shift, lattice_shift, wrap_positions
+from gripdem.boundary import Box, apply_lattice_shift, lattice_shift
 
 
 @dataclass
@@ -179,15 +180,3 @@ def transfer_history(old: PairList, old_history: np.ndarray, new: PairList, n: i
     found = (at < len(sorted_key)) & (sorted_key[at_clipped] == new_key)
     history[found] = old_history[order[at_clipped[found]]]
     return history
-
-
-def rewrap(
-    positions: np.ndarray, velocities: np.ndarray, box: Box, delta: float, image_velocity: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Wrap positions into the box with the LE remap and the z velocity jump (SPEC §2)."""
-    return wrap_positions(positions, box, delta, velocities, image_velocity)
-
-
-def needs_rebuild(max_displacement: float, delta_change: float, skin: float) -> bool:
-    """SPEC §9: rebuild when ``|delta change| + 2 * largest displacement`` exceeds the skin."""
-    return abs(delta_change) + 2.0 * max_displacement > skin

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
 import pytest
 
 from gripdem.dem.scenes import generate
@@ -27,3 +28,12 @@ def test_default_simulation_is_valid_and_fast(make_config, scene):
         assert report["x_crossings_per_frame"] > 0.05  # a few crossers per 10-frame window
     # 10 minutes for the whole default dataset on 2 cores leaves ~3 min per simulation
     assert wall < 180, f"one default simulation took {wall:.0f} s"
+
+
+@pytest.mark.slow
+def test_worker_processes_do_not_change_the_data(make_config):
+    cfg = make_config("lebc", sims=2, frames=11)
+    serial, _ = generate(cfg, progress=False, workers=1)
+    parallel, _ = generate(cfg, progress=False, workers=2)
+    np.testing.assert_array_equal(serial.positions, parallel.positions)
+    np.testing.assert_array_equal(serial.velocities, parallel.velocities)

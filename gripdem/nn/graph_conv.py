@@ -35,16 +35,62 @@ class EdgeGraph:
     n_nodes: int
 
 
+def _spmm(edge_index: torch.Tensor, weight: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    matrix = torch.sparse_coo_tensor(
+        edge_index, weight, (x.shape[0], x.shape[0]), check_invariants=False
+    )
+    return torch.sparse.mm(matrix, x)
+
+
+def _edge_products(
+    edge_index: torch.Tensor, grad_out: torch.Tensor, x: torch.Tensor
+) -> torch.Tensor:
+    """``<grad_out[target_e], x[source_e]>`` for every edge ``(E,)``: a sampled dense-dense
+    product (SDDMM) on the graph's CSR pattern, never an ``E x features`` gather."""
+    n = x.shape[0]
+    target, source = edge_index
+    order = torch.argsort(target * n + source)
+    crow = torch._convert_indices_from_coo_to_csr(target[order], n)
+    pattern = torch.sparse_csr_tensor(
+        crow, source[order], torch.zeros(order.shape[0], dtype=x.dtype, device=x.device), (n, n)
+    )
+    sampled = torch.sparse.sampled_addmm(pattern, grad_out, x.t().contiguous(), beta=0.0)
+    products = torch.empty_like(sampled.values())
+    products[order] = sampled.values()
+    return products
+
+
+class _SparseAggregate(torch.autograd.Function):
+    """``W @ x`` with W given by an edge list. torch's own backward for the sparse values
+    forms ``grad @ x^T`` densely (O(n^2 x features)); here it is an SDDMM, O(E x features)."""
+
+    @staticmethod
+    def forward(ctx, x, edge_index, weight):
+        ctx.save_for_backward(x, edge_index, weight)
+        return _spmm(edge_index, weight, x)
+
+    @staticmethod
+    def backward(ctx, grad_out):
+        x, edge_index, weight = ctx.saved_tensors
+        grad_x = grad_w = None
+        if ctx.needs_input_grad[0]:
+            grad_x = _spmm(edge_index.flip(0), weight, grad_out)
+        if ctx.needs_input_grad[2]:
+            grad_w = _edge_products(edge_index, grad_out.contiguous(), x)
+        return grad_x, None, grad_w
+
+
 def sparse_aggregate(
     x: torch.Tensor, edge_index: torch.Tensor, weight: torch.Tensor, n_nodes: int
 ) -> torch.Tensor:
-    """``out[i] = sum_j W[i, j] x[j]`` for ``x`` of shape ``(n_nodes, features)``.
+    """``out[i] = sum_j W[i, j] x[j]`` for ``x`` of shape ``(n_nodes, features)``, W given by
+    ``edge_index (2, E)`` (target, source) and ``weight (E,)``; duplicate edges add up.
 
-    Uses a COO sparse-dense product: differentiable in ``x`` and in ``weight``, memory
-    O(E + n_nodes * features).
+    Differentiable in ``x`` and ``weight``; time and memory O(E x features + n x features).
     """
-    matrix = torch.sparse_coo_tensor(edge_index, weight, (n_nodes, n_nodes), check_invariants=False)
-    return torch.sparse.mm(matrix, x)
+    if x.shape[0] != n_nodes:
+        raise ValueError(f"x has {x.shape[0]} rows, the graph {n_nodes} nodes")
+    return _SparseAggregate.apply(x, edge_index, weight)
 
 
 class EdgeWeightNet(nn.Module):

@@ -10,6 +10,7 @@ block-diagonal graph over ``batch * particles`` nodes given as an edge list.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import torch
@@ -51,9 +52,12 @@ def _edge_products(
     target, source = edge_index
     order = torch.argsort(target * n + source)
     crow = torch._convert_indices_from_coo_to_csr(target[order], n)
-    pattern = torch.sparse_csr_tensor(
-        crow, source[order], torch.zeros(order.shape[0], dtype=x.dtype, device=x.device), (n, n)
-    )
+    zeros = torch.zeros(order.shape[0], dtype=x.dtype, device=x.device)
+    with warnings.catch_warnings():  # "sparse CSR support is in beta": tested here
+        warnings.simplefilter("ignore", UserWarning)
+        pattern = torch.sparse_csr_tensor(
+            crow, source[order], zeros, (n, n), check_invariants=False
+        )
     sampled = torch.sparse.sampled_addmm(pattern, grad_out, x.t().contiguous(), beta=0.0)
     products = torch.empty_like(sampled.values())
     products[order] = sampled.values()

@@ -39,11 +39,12 @@ from gripdem import metrics
 from gripdem.boundary import Boundary, Box
 from gripdem.data.h5io import atomic_h5_write
 from gripdem.data.schema import (
-    POSITION_RTOL,
     DatasetError,
-    _attr,
-    _boundary_from_attrs,
-    _float_attr,
+    boundary_from_attrs,
+    check_shape,
+    read_attr,
+    read_float_attr,
+    validate_positions,
 )
 from gripdem.physics import physics_summary
 
@@ -143,61 +144,39 @@ class Predictions:
 # --------------------------------------------------------------------------------------------
 # validation
 # --------------------------------------------------------------------------------------------
-def _check_shape(path, name: str, array: np.ndarray, shape: tuple, what: str) -> None:
-    if array.ndim != len(shape) or any(
-        s is not None and a != s for a, s in zip(array.shape, shape, strict=True)
-    ):
-        raise DatasetError(path, name, f"expected shape {what}, got {tuple(array.shape)}")
-
-
 def _check_positions(path, name: str, array: np.ndarray, box: Box) -> None:
     if not np.issubdtype(array.dtype, np.floating):
         raise DatasetError(path, name, f"expected floating-point values, got {array.dtype}")
-    bad = ~np.isfinite(array)
-    if bad.any():
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise DatasetError(
-            path, name, f"expected finite values, found {int(bad.sum())} NaN/Inf (first at {first})"
-        )
-    for axis, length in enumerate(box.lengths):
-        lo, hi = float(array[..., axis].min()), float(array[..., axis].max())
-        tol = POSITION_RTOL * length
-        if lo < -0.5 * length - tol or hi > 0.5 * length + tol:
-            raise DatasetError(
-                path,
-                name,
-                f"expected wrapped coordinates in [{-0.5 * length:g}, {0.5 * length:g}) on axis "
-                f"{'xyz'[axis]}, found values in [{lo:g}, {hi:g}]",
-            )
+    validate_positions(path, array, box, field=name)
 
 
 def validate(p: Predictions, path=None) -> None:
     """Shapes agree, positions finite and inside the box, times finite, flags sensible."""
     true = np.asarray(p.true_positions)
-    _check_shape(path, "true_positions", true, (None, None, None, 3), "(windows, f, particles, 3)")
+    check_shape(path, "true_positions", true, (None, None, None, 3), "(windows, f, particles, 3)")
     w, f, n, _ = true.shape
     if min(w, f, n) == 0:
         raise DatasetError(path, "true_positions", f"expected non-empty arrays, got {true.shape}")
     box = p.box
     _check_positions(path, "true_positions", true, box)
     pred = np.asarray(p.pred_positions)
-    _check_shape(path, "pred_positions", pred, true.shape, f"{true.shape} like true_positions")
+    check_shape(path, "pred_positions", pred, true.shape, f"{true.shape} like true_positions")
     _check_positions(path, "pred_positions", pred, box)
     for name, arr in p.baselines.items():
         arr = np.asarray(arr)
-        _check_shape(path, f"baseline/{name}", arr, true.shape, f"{true.shape}")
+        check_shape(path, f"baseline/{name}", arr, true.shape, f"{true.shape}")
         _check_positions(path, f"baseline/{name}", arr, box)
     last = np.asarray(p.last_positions)
-    _check_shape(path, "last_positions", last, (w, n, 3), f"(windows, particles, 3) = {(w, n, 3)}")
+    check_shape(path, "last_positions", last, (w, n, 3), f"(windows, particles, 3) = {(w, n, 3)}")
     _check_positions(path, "last_positions", last, box)
     times = np.asarray(p.times)
-    _check_shape(path, "times", times, (w, f), f"(windows, f) = {(w, f)}")
+    check_shape(path, "times", times, (w, f), f"(windows, f) = {(w, f)}")
     if not np.isfinite(times).all():
         raise DatasetError(path, "times", "expected finite absolute frame times")
     for name in ("sim_index", "window_start"):
         value = getattr(p, name)
         if value is not None:
-            _check_shape(path, name, np.asarray(value), (w,), f"(windows,) = ({w},)")
+            check_shape(path, name, np.asarray(value), (w,), f"(windows,) = ({w},)")
     if not (np.isfinite(p.radius) and p.radius > 0):
         raise DatasetError(path, "radius", f"expected a positive radius, got {p.radius!r}")
     if not (np.isfinite(p.frame_interval) and p.frame_interval > 0):
@@ -265,7 +244,7 @@ def read_predictions(path: str | os.PathLike) -> Predictions:
     except OSError as exc:
         raise DatasetError(path, "<file>", f"expected an HDF5 file ({exc})") from None
     with h5:
-        fmt = _attr(path, h5, "format", None)
+        fmt = read_attr(path, h5, "format", None)
         if fmt != FORMAT_NAME:
             raise DatasetError(path, "format", f"expected {FORMAT_NAME!r}, got {fmt!r}")
         for name in ("pred_positions", "true_positions", "last_positions", "times"):
@@ -276,7 +255,7 @@ def read_predictions(path: str | os.PathLike) -> Predictions:
             return np.asarray(h5[name][()]) if name in h5 else None
 
         try:
-            info = json.loads(_attr(path, h5, "run", "{}"))
+            info = json.loads(read_attr(path, h5, "run", "{}"))
         except json.JSONDecodeError:
             raise DatasetError(path, "run", "expected a JSON string") from None
         p = Predictions(
@@ -284,15 +263,15 @@ def read_predictions(path: str | os.PathLike) -> Predictions:
             true_positions=np.asarray(h5["true_positions"][()]),
             last_positions=np.asarray(h5["last_positions"][()]),
             times=np.asarray(h5["times"][()]),
-            boundary=_boundary_from_attrs(path, h5),
-            radius=_float_attr(path, h5, "radius"),
-            frame_interval=_float_attr(path, h5, "frame_interval"),
-            in_sample=bool(_attr(path, h5, "in_sample")),
-            protocol=str(_attr(path, h5, "protocol")),
+            boundary=boundary_from_attrs(path, h5),
+            radius=read_float_attr(path, h5, "radius"),
+            frame_interval=read_float_attr(path, h5, "frame_interval"),
+            in_sample=bool(read_attr(path, h5, "in_sample")),
+            protocol=str(read_attr(path, h5, "protocol")),
             sim_index=optional("sim_index"),
             window_start=optional("window_start"),
             baselines={k: np.asarray(v[()]) for k, v in h5.get("baseline", {}).items()},
-            body_force_amplitude=_float_attr(path, h5, "body_force_amplitude", 0.0),
+            body_force_amplitude=read_float_attr(path, h5, "body_force_amplitude", 0.0),
             info=info,
         )
     validate(p, path)

@@ -133,16 +133,22 @@ class DatasetMeta:
 # --------------------------------------------------------------------------------------------
 # validation
 # --------------------------------------------------------------------------------------------
-def _check_array(path, name: str, array: np.ndarray, shape: tuple, what: str) -> None:
+def check_shape(path, name: str, array: np.ndarray, shape: tuple, what: str) -> None:
+    """Raise unless ``array`` has ``shape`` (``None`` = any length on that axis)."""
     if array.ndim != len(shape) or any(
         s is not None and a != s for a, s in zip(array.shape, shape, strict=True)
     ):
         raise DatasetError(path, name, f"expected shape {what}, got {tuple(array.shape)}")
+
+
+def check_array(path, name: str, array: np.ndarray, shape: tuple, what: str) -> None:
+    """Shape as :func:`check_shape`, and a floating-point dtype."""
+    check_shape(path, name, array, shape, what)
     if not np.issubdtype(array.dtype, np.floating):
         raise DatasetError(path, name, f"expected a floating-point array, got dtype {array.dtype}")
 
 
-def _check_finite(path, name: str, array: np.ndarray) -> None:
+def check_finite(path, name: str, array: np.ndarray) -> None:
     bad = ~np.isfinite(array)
     if bad.any():
         first = tuple(int(i) for i in np.argwhere(bad)[0])
@@ -154,7 +160,7 @@ def _check_finite(path, name: str, array: np.ndarray) -> None:
 def validate_times(path, times: np.ndarray) -> float:
     """Check ``(sims, frames)`` times: finite, strictly increasing, equidistant, one interval
     shared by all simulations. Returns the frame interval."""
-    _check_finite(path, "times", times)
+    check_finite(path, "times", times)
     if times.shape[1] < 2:
         raise DatasetError(path, "times", f"expected at least 2 frames, got {times.shape[1]}")
     steps = np.diff(times, axis=1)
@@ -180,9 +186,11 @@ def validate_times(path, times: np.ndarray) -> float:
     return interval
 
 
-def validate_positions(path, positions: np.ndarray, box: Box, sim_index: int | None = None) -> None:
+def validate_positions(
+    path, positions: np.ndarray, box: Box, sim_index: int | None = None, field: str = "positions"
+) -> None:
     """Finite and inside ``[-l/2, l/2)`` within ``POSITION_RTOL`` per axis."""
-    _check_finite(path, "positions", positions)
+    check_finite(path, field, positions)
     for axis, length in enumerate(box.lengths):
         coords = positions[..., axis]
         tol = POSITION_RTOL * length
@@ -191,7 +199,7 @@ def validate_positions(path, positions: np.ndarray, box: Box, sim_index: int | N
             where = "" if sim_index is None else f" (simulation {sim_index})"
             raise DatasetError(
                 path,
-                "positions",
+                field,
                 f"expected wrapped coordinates in [-l/2, l/2) = "
                 f"[{-0.5 * length:g}, {0.5 * length:g}) on axis {'xyz'[axis]}{where}, found "
                 f"values in [{lo:g}, {hi:g}]; wrap them with gripdem.boundary.wrap_positions",
@@ -201,18 +209,18 @@ def validate_positions(path, positions: np.ndarray, box: Box, sim_index: int | N
 def validate(data: TrajectoryData, path=None) -> float:
     """Check an in-memory dataset; returns the frame interval. Raises :class:`DatasetError`."""
     pos = np.asarray(data.positions)
-    _check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
+    check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
     s, f, n, _ = pos.shape
     if min(s, f, n) == 0:
         raise DatasetError(
             path, "positions", f"expected non-empty sims/frames/particles, got {pos.shape}"
         )
     times = np.asarray(data.times)
-    _check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
+    check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
     if data.velocities is not None:
         vel = np.asarray(data.velocities)
-        _check_array(path, "velocities", vel, pos.shape, f"{pos.shape} like positions")
-        _check_finite(path, "velocities", vel)
+        check_array(path, "velocities", vel, pos.shape, f"{pos.shape} like positions")
+        check_finite(path, "velocities", vel)
     interval = validate_times(path, times)
     _check_radius(path, data.radius, data.radii, n)
     _check_volume_fraction(path, data.boundary.box, n, data.radius, data.radii)
@@ -226,8 +234,8 @@ def validate(data: TrajectoryData, path=None) -> float:
 def _check_radius(path, radius: float, radii: np.ndarray | None, n: int) -> None:
     if radii is not None:
         radii = np.asarray(radii)
-        _check_array(path, "radii", radii, (n,), f"(particles,) = ({n},)")
-        _check_finite(path, "radii", radii)
+        check_array(path, "radii", radii, (n,), f"(particles,) = ({n},)")
+        check_finite(path, "radii", radii)
         if not (radii > 0).all():
             raise DatasetError(path, "radii", "expected positive radii")
     if not (np.isfinite(radius) and radius > 0):
@@ -293,7 +301,7 @@ def write_dataset(path: str | os.PathLike, data: TrajectoryData, overwrite: bool
 # --------------------------------------------------------------------------------------------
 # reading
 # --------------------------------------------------------------------------------------------
-def _attr(path, h5: h5py.File, name: str, default: Any = ...) -> Any:
+def read_attr(path, h5: h5py.File, name: str, default: Any = ...) -> Any:
     if name not in h5.attrs:
         if default is ...:
             raise DatasetError(path, name, "missing attribute")
@@ -304,37 +312,37 @@ def _attr(path, h5: h5py.File, name: str, default: Any = ...) -> Any:
     return value
 
 
-def _float_attr(path, h5, name: str, default: Any = ...) -> float:
-    value = _attr(path, h5, name, default)
+def read_float_attr(path, h5, name: str, default: Any = ...) -> float:
+    value = read_attr(path, h5, name, default)
     try:
         return float(np.asarray(value).reshape(()))
     except (TypeError, ValueError):
         raise DatasetError(path, name, f"expected a number, got {value!r}") from None
 
 
-def _boundary_from_attrs(path, h5: h5py.File) -> Boundary:
-    box_attr = np.asarray(_attr(path, h5, "box"), dtype=np.float64)
+def boundary_from_attrs(path, h5: h5py.File) -> Boundary:
+    box_attr = np.asarray(read_attr(path, h5, "box"), dtype=np.float64)
     if box_attr.shape != (3,) or not np.isfinite(box_attr).all() or not (box_attr > 0).all():
         raise DatasetError(
             path, "box", f"expected 3 positive lengths (lx, ly, lz), got {box_attr!r}"
         )
     box = Box.from_lengths(box_attr)
-    kind = str(_attr(path, h5, "boundary"))
+    kind = str(read_attr(path, h5, "boundary"))
     if kind not in BOUNDARY_KINDS:
         raise DatasetError(path, "boundary", f"expected one of {BOUNDARY_KINDS}, got {kind!r}")
     if kind == "periodic":
         return Boundary(box)
-    shear_rate = _float_attr(path, h5, "shear_rate")
+    shear_rate = read_float_attr(path, h5, "shear_rate")
     if not (np.isfinite(shear_rate) and shear_rate > 0):
         raise DatasetError(
             path,
             "shear_rate",
             f"expected a positive shear rate (1/s) for lees_edwards data, got {shear_rate!r}",
         )
-    sign = int(_float_attr(path, h5, "le_sign"))
+    sign = int(read_float_attr(path, h5, "le_sign"))
     if sign not in (1, -1):
         raise DatasetError(path, "le_sign", f"expected +1 or -1, got {sign!r}")
-    origin = _float_attr(path, h5, "le_time_origin")
+    origin = read_float_attr(path, h5, "le_time_origin")
     return Boundary(box, LeesEdwards(shear_rate, sign, origin))
 
 
@@ -349,33 +357,33 @@ def read_meta(path: str | os.PathLike, h5: h5py.File | None = None) -> DatasetMe
                 return read_meta(path, handle)
         except OSError as exc:
             raise DatasetError(path, "<file>", f"expected an HDF5 file ({exc})") from None
-    fmt = _attr(path, h5, "format", None)
+    fmt = read_attr(path, h5, "format", None)
     if fmt is not None and fmt != FORMAT_NAME:
         raise DatasetError(path, "format", f"expected {FORMAT_NAME!r}, got {fmt!r}")
     for name in ("positions", "times"):
         if name not in h5:
             raise DatasetError(path, name, "missing dataset")
     pos = h5["positions"]
-    _check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
+    check_array(path, "positions", pos, (None, None, None, 3), "(sims, frames, particles, 3)")
     if pos.dtype != np.float64:
         raise DatasetError(path, "positions", f"expected float64, got {pos.dtype}")
     s, f, n, _ = pos.shape
     times = h5["times"]
-    _check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
+    check_array(path, "times", times, (s, f), f"(sims, frames) = ({s}, {f})")
     interval = validate_times(path, np.asarray(times[()], dtype=np.float64))
     has_vel = "velocities" in h5
     if has_vel:
-        _check_array(path, "velocities", h5["velocities"], pos.shape, f"{pos.shape} like positions")
+        check_array(path, "velocities", h5["velocities"], pos.shape, f"{pos.shape} like positions")
     radii = np.asarray(h5["radii"][()]) if "radii" in h5 else None
     if radii is not None:
         _check_radius(path, float(np.mean(radii)), radii, n)
-        radius = _float_attr(path, h5, "radius", float(np.mean(radii)))
+        radius = read_float_attr(path, h5, "radius", float(np.mean(radii)))
     else:
-        radius = _float_attr(path, h5, "radius")
+        radius = read_float_attr(path, h5, "radius")
         _check_radius(path, radius, None, n)
-    boundary = _boundary_from_attrs(path, h5)
+    boundary = boundary_from_attrs(path, h5)
     _check_volume_fraction(path, boundary.box, n, radius, radii)
-    provenance_raw = _attr(path, h5, "provenance", "{}")
+    provenance_raw = read_attr(path, h5, "provenance", "{}")
     try:
         provenance = json.loads(provenance_raw)
     except json.JSONDecodeError:
@@ -388,7 +396,7 @@ def read_meta(path: str | os.PathLike, h5: h5py.File | None = None) -> DatasetMe
         boundary=boundary,
         radius=radius,
         frame_interval=interval,
-        body_force_amplitude=_float_attr(path, h5, "body_force_amplitude", 0.0),
+        body_force_amplitude=read_float_attr(path, h5, "body_force_amplitude", 0.0),
         provenance=provenance,
         has_velocities=has_vel,
     )
@@ -408,7 +416,7 @@ def read_dataset(path: str | os.PathLike, validate_positions_: bool = True) -> T
         for sim in range(meta.n_sims):
             validate_positions(path, positions[sim], meta.box, sim)
     if velocities is not None:
-        _check_finite(path, "velocities", velocities)
+        check_finite(path, "velocities", velocities)
     return TrajectoryData(
         positions=positions,
         times=times,

@@ -117,6 +117,15 @@ def resolve_workers(config: GeneratorConfig, workers: int | None, device: str = 
     costs about 2 s to start)."""
     if config.backend == "torch" and device != "cpu":
         return 1
+    if multiprocessing.get_start_method(allow_none=True) not in (
+        None,
+        "fork",
+        "spawn",
+        "forkserver",
+    ):
+        # Inside a worker of another pool (e.g. Hydra's joblib launcher sets "loky"), spawned
+        # children cannot start: simulate in this process.
+        return 1
     if workers is None and config.preset.particles * config.total_steps < PARALLEL_MIN_WORK:
         return 1
     available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()

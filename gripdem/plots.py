@@ -204,14 +204,14 @@ def default_imposed(p: Predictions) -> tuple[Callable[[np.ndarray], np.ndarray],
     le = p.boundary.lees_edwards
     if le is not None:
         rate = le.sign * le.shear_rate
-        return (lambda x: rate * np.asarray(x)), f"imposed: u_z = {rate:g} x"
+        return (lambda x: rate * np.asarray(x)), f"imposed: u_z = {rate:g} 1/s · x"
     centres, vz, _ = velocity_profile(
         p.true_positions, p.last_positions, p.box, p.offsets(), p.frame_interval, bins=32
     )
     a, b = fit_profile(centres, vz, p.box, "cosine")
     box = p.box
     return (lambda x: profile_basis(x, box, "cosine") @ np.array([a, b])), (
-        f"imposed shape: cosine fit to truth (A = {a:.3g})"
+        f"imposed shape: cosine fit to truth (A = {a:.3g} m/s)"
     )
 
 

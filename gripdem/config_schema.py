@@ -45,6 +45,22 @@ class TrainableGraph(Enum):
     none = "none"
 
 
+class EncoderName(Enum):
+    graph_conv = "graph_conv"
+    interaction = "interaction"
+
+
+class PositionFeatures(Enum):
+    auto = "auto"
+    true = "true"
+    false = "false"
+
+
+class LrSchedule(Enum):
+    constant = "constant"
+    cosine = "cosine"
+
+
 class EncodingName(Enum):
     sincos = "sincos"
     vct = "vct"
@@ -67,13 +83,22 @@ class SplitSchema:
 
 @dataclass
 class EncoderSchema:
+    """The options of both encoders (each reads its own, see gripdem.models.module)."""
+
+    name: EncoderName = EncoderName.graph_conv
+    cutoff: float = 3.0
     channels: int = 64
+    # graph_conv
     n_blocks: int = 3
     temporal_kernel: int = 3
     dropout: float = 0.0
     trainable_graph: TrainableGraph = TrainableGraph.edge
     edge_feature_dim: int = 4
     dense_init: str = "zeros"
+    # interaction
+    rounds: int = 3
+    edge_history: int = 3
+    position_features: PositionFeatures = PositionFeatures.auto
 
 
 @dataclass
@@ -81,7 +106,7 @@ class ModelSchema:
     encoder: EncoderSchema = field(default_factory=EncoderSchema)
     name: str = MISSING
     decoder_mode: DecoderMode = DecoderMode.grip
-    encoding: EncodingName = EncodingName.sincos
+    encoding: EncodingName = EncodingName.unwrapped
     vct_shift: VctShift = VctShift.learned
     residual_base: ResidualBase = ResidualBase.constant_velocity
     hidden: int = 350
@@ -90,6 +115,17 @@ class ModelSchema:
     decoder_dropout: float = 0.0
     lr: float = 1e-4
     weight_decay: float = 0.0
+    lr_schedule: LrSchedule = LrSchedule.constant
+    warmup_fraction: float = 0.05
+    input_noise: float = 0.0
+
+
+@dataclass
+class BaselinesSchema:
+    # lags of the linear autoregressive baseline (null: min(history_len, 10))
+    ar_lags: Optional[int] = None
+    # relative ridge penalty of its least-squares fit
+    ar_ridge: float = 1e-6
 
 
 @dataclass
@@ -104,7 +140,7 @@ class DataSchema:
     history_len: Optional[int] = None
     train_stride: int = 1
     eval_stride: Optional[int] = None
-    encoding: EncodingName = EncodingName.sincos
+    encoding: EncodingName = EncodingName.unwrapped
     normalise: bool = True
     graph_cutoff: float = 3.0
     graph_alpha: float = 0.001
@@ -129,6 +165,7 @@ class ConfigSchema:
     split: SplitSchema = field(default_factory=SplitSchema)
     data: DataSchema = field(default_factory=DataSchema)
     model: ModelSchema = field(default_factory=ModelSchema)
+    baselines: BaselinesSchema = field(default_factory=BaselinesSchema)
     trainer: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] = field(default_factory=dict)
     callbacks: Any = None
@@ -162,6 +199,18 @@ def check_combination(cfg: DictConfig) -> None:
         )
     if cfg.model.vct_shift == VctShift.exact and mode != "vct":
         raise ValueError("model.vct_shift=exact is only read by model.decoder_mode=vct")
+    exact = cfg.model.encoding == EncodingName.unwrapped
+    if cfg.model.encoder.name == EncoderName.interaction and not exact:
+        raise ValueError(
+            "model.encoder.name=interaction needs the exact frame: model.encoding=unwrapped, "
+            f"got {cfg.model.encoding.value}"
+        )
+    if not exact:
+        log.info(
+            "model.encoding=%s: the paper's wrapped-space decoding (for reproduction; not exact "
+            "for LE crossers)",
+            cfg.model.encoding.value,
+        )
     if cfg.data.protocol == Protocol.paper:
         log.warning("data.protocol=paper is IN-SAMPLE (train = test): report it as such")
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history

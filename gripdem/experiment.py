@@ -32,6 +32,7 @@ from gripdem.config_schema import check_combination
 from gripdem.data.cache import ensure_scene_dataset
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
+from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
 from gripdem.predictions import Predictions, write_predictions
@@ -67,6 +68,19 @@ def build_datamodule(cfg: DictConfig, path: Path) -> TrajectoryDataModule:
     return dm
 
 
+def fit_linear_ar(cfg: DictConfig, dm: TrajectoryDataModule) -> LinearAR:
+    """The linear AR baseline on the training windows (lags: ``baselines.ar_lags`` or
+    ``min(history_len, 10)``)."""
+    lags = cfg.baselines.ar_lags
+    lags = min(int(dm.plan.history_len), 10) if lags is None else int(lags)
+    if lags > dm.plan.history_len:
+        raise ValueError(
+            f"baselines.ar_lags={lags} exceeds the history the windows hold "
+            f"(history_len {dm.plan.history_len})"
+        )
+    return dm.fit_linear_ar(lags, float(cfg.baselines.ar_ridge))
+
+
 def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
     meta = dm.meta
     model_cfg = plain(cfg.model)
@@ -76,12 +90,14 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
             for k, v in meta.boundary.to_attrs().items()
         },
         "diameter": meta.diameter,
+        "frame_interval": meta.frame_interval,
     }
     return TrajectoryModule(
         scene=scene,
         normalizer=dm.normalizer.to_dict(),
         encoding=model_cfg["encoding"],
         horizon=dm.split.horizon,
+        history_len=int(dm.plan.history_len),
         decoder_mode=model_cfg["decoder_mode"],
         vct_shift=model_cfg["vct_shift"],
         residual_base=model_cfg["residual_base"],
@@ -92,8 +108,12 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         decoder_dropout=model_cfg["decoder_dropout"],
         lr=model_cfg["lr"],
         weight_decay=model_cfg["weight_decay"],
+        lr_schedule=model_cfg["lr_schedule"],
+        warmup_fraction=model_cfg["warmup_fraction"],
+        input_noise=model_cfg["input_noise"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
+        linear_ar=fit_linear_ar(cfg, dm).to_dict(),
     )
 
 
@@ -109,6 +129,8 @@ def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
         "decoder_mode": model["decoder_mode"],
         "vct_shift": model["vct_shift"],
         "encoding": summary["encoding"],
+        "frame": "exact" if summary["encoding"] == "unwrapped" else "paper",
+        "encoder": model["encoder"]["name"],
         "protocol": summary.get("protocol", cfg.data.protocol.value),
         "in_sample": bool(dm.in_sample),
         "history_len": int(dm.plan.history_len),
@@ -119,6 +141,8 @@ def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
         "hidden": int(model["hidden"]),
         "n_heads": int(model["n_heads"]),
         "lr": float(model["lr"]),
+        "lr_schedule": model["lr_schedule"],
+        "input_noise": float(model["input_noise"]),
         "graph_cutoff_d": float(cfg.data.graph_cutoff),
         "seed": int(cfg.seed),
     }

@@ -207,7 +207,7 @@ def mean_squared_displacement(
     pos, last, off = _windows(positions, last_positions, offsets)
     w, f = pos.shape[:2]
     total = np.zeros(f)
-    increments = np.full(f, float(offset_increment)) if offset_increment else None
+    increments = np.full(f, float(offset_increment))
     for k in range(w):
         frames = np.concatenate([last[k, None], pos[k]], axis=0)
         frame_offsets = np.concatenate([[0.0], off[k]])  # the anchor's offset is not used

@@ -134,7 +134,7 @@ def _continuous(p: Predictions, series: np.ndarray, w: int, n: int) -> np.ndarra
     last observed frame on (:func:`gripdem.boundary.unwrap_trajectory`, image cells moving with
     the LE offset), so a face crossing is a curve passing a face line, not a jump."""
     offsets = np.concatenate([[0.0], p.offsets()[w]])  # the anchor's offset is not used
-    increments = np.full(p.horizon, p.offset_increment) if p.offset_increment else None
+    increments = np.full(p.horizon, p.offset_increment)
     return unwrap_trajectory(series[w, :, n], p.box, offsets, increments)
 
 

@@ -13,9 +13,14 @@ from gripdem.boundary import (
     Boundary,
     Box,
     LeesEdwards,
+    add_affine_flow,
+    affine_flow_strain,
     displacement,
+    lattice_continuous_steps,
     minimum_image,
+    remove_affine_flow,
     rewrap_trajectory,
+    step_start_x,
     unwrap_trajectory,
     wrap_positions,
 )
@@ -138,3 +143,53 @@ def test_invalid_settings_are_refused_with_names():
         LeesEdwards(float("nan"))
     with pytest.raises(ValueError, match="sign"):
         LeesEdwards(1.0, sign=2)
+
+
+@pytest.mark.parametrize("as_torch", [False, True])
+def test_lattice_continuous_steps_follow_the_image_of_the_anchor(as_torch):
+    """A particle riding the affine flow u_z = k x out through +x between frames 0 and 1.
+
+    Times 1.5 .. 2.25 (dt 0.25): offsets 3.0, 3.5, 4.0, 4.5, the image cell advances by
+    inc = 0.5 per frame, the flow's strain per frame is 0.5 * 0.25 = 0.125. Continuous x =
+    1.9, 2.1, 2.3, 2.5 and z steps 0.125 * x_mid = 0.25, 0.275, 0.3. Seen from the cell it
+    occupies at frame 3 (x = -1.5 after the crossing), the same particle was at x = -2.1 and
+    its z steps are 0.125 * x_mid with x_mid = -2.0, -1.8, -1.6, i.e. one inc lower each.
+    """
+    times = np.array([1.5, 1.75, 2.0, 2.25])
+    offsets = LE.offset(BOX, times)
+    wrapped = np.array(
+        [[1.9, 0.0, 0.0], [-1.9, 0.0, -3.25], [-1.7, 0.0, -3.475], [-1.5, 0.0, -3.675]]
+    )
+    if as_torch:
+        wrapped, offsets = torch.tensor(wrapped), torch.tensor(offsets)
+    from_first = lattice_continuous_steps(wrapped, BOX, offsets, anchor=0)
+    from_last = lattice_continuous_steps(wrapped, BOX, offsets, anchor=-1)
+    np.testing.assert_allclose(
+        from_first, [[0.2, 0, 0.25], [0.2, 0, 0.275], [0.2, 0, 0.3]], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        from_last, [[0.2, 0, -0.25], [0.2, 0, -0.225], [0.2, 0, -0.2]], atol=1e-12
+    )
+    # the same as anchor=3; summed from the anchor and wrapped, the frames come back
+    np.testing.assert_allclose(lattice_continuous_steps(wrapped, BOX, offsets, anchor=3), from_last)
+    rebuilt = np.asarray(wrapped)[3:4] - np.cumsum(np.asarray(from_last)[::-1], 0)[::-1]
+    np.testing.assert_allclose(
+        rewrap_trajectory(np.asarray(rebuilt), BOX, np.asarray(offsets)[:3]),
+        np.asarray(wrapped)[:3],
+        atol=1e-12,
+    )
+    # flow-relative steps do not depend on the image: the particle only moves along x
+    strain = affine_flow_strain(Boundary(BOX, LE), 0.25)
+    assert strain == pytest.approx(0.125)
+    for steps, x_end in ((from_first, 2.5), (from_last, -1.5)):
+        x_end = torch.tensor(x_end) if as_torch else np.array(x_end)
+        relative = remove_affine_flow(steps, step_start_x(steps, x_end), strain)
+        np.testing.assert_allclose(relative, [[0.2, 0, 0]] * 3, atol=1e-12)
+        back = add_affine_flow(relative, step_start_x(steps, x_end), strain)
+        np.testing.assert_allclose(back, steps, atol=1e-12)
+
+
+def test_lattice_continuous_steps_in_a_periodic_box_are_minimum_images():
+    wrapped = np.array([[1.9, 2.9, 4.9], [-1.9, -2.9, -4.9], [-1.7, -2.7, -4.7]])
+    steps = lattice_continuous_steps(wrapped, BOX)
+    np.testing.assert_allclose(steps, [[0.2, 0.2, 0.2], [0.2, 0.2, 0.2]], atol=1e-12)

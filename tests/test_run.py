@@ -18,7 +18,16 @@ GROUPS = {
     "scene": ["pbc", "lebc"],
     "preset": ["tiny", "default", "paper"],
     "split": ["190-10", "180-20", "150-50", "100-100", "custom"],
-    "model": ["grip", "pct", "vct", "vct_exact"],
+    "model": [
+        "interaction",
+        "grip",
+        "pct",
+        "vct",
+        "grip_paper",
+        "pct_paper",
+        "vct_paper",
+        "vct_paper_exact",
+    ],
     "trainer": ["cpu", "gpu", "ddp"],
     "experiment": ["smoke", "fast", "paper"],
     "hparams_search": ["optuna"],
@@ -63,8 +72,24 @@ def test_custom_split_and_defaults():
     cfg = compose_run(["split=custom", "split.history=50", "split.horizon=5"])
     assert cfg.split.name == "50-5"
     default = compose_run([])
-    assert (default.scene.name, default.split.name, default.model.name) == ("pbc", "190-10", "grip")
+    assert (default.scene.name, default.split.name, default.model.name) == (
+        "pbc",
+        "190-10",
+        "interaction",
+    )
     assert default.data.history_len == 10  # experiment=fast is the default preset
+    # the data's graph cut-off follows the encoder (one source of truth)
+    assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.5
+    assert compose_run(["model=grip_paper"]).data.graph_cutoff == 3.0
+    assert compose_run(["model=vct"]).data.encoding.value == "unwrapped"
+
+
+def test_the_interaction_encoder_refuses_the_paper_frame():
+    cfg = compose_run(["model=interaction", "model.encoding=sincos"], hydra_node=False)
+    from gripdem.config_schema import check_combination
+
+    with pytest.raises(ValueError, match="exact frame"):
+        check_combination(cfg)
 
 
 @pytest.mark.parametrize(
@@ -107,19 +132,26 @@ def hparams_in_events(out: Path) -> tuple[set, set]:
 
 
 @pytest.mark.parametrize("scene", ["pbc", "lebc"])
-@pytest.mark.parametrize("model", ["grip", "pct", "vct", "vct_exact"])
+@pytest.mark.parametrize("model", ["interaction", "grip", "pct", "vct", "vct_paper"])
 def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request, scene, model):
     request.getfixturevalue(f"tiny_{scene}_path")  # generated once per session
     cfg, out, report = run_smoke(
         tmp_path, monkeypatch, gripdem_data_root, [f"scene={scene}", f"model={model}"]
     )
     metrics = json.loads((out / "metrics.json").read_text())
-    for key in ("test/rmse", "test/rmse_constant_velocity", "val/rmse_best", *HP_METRICS):
+    for key in (
+        "test/rmse",
+        "test/rmse_constant_velocity",
+        "test/rmse_linear_ar",
+        "test/rmse_ratio_constant_velocity",
+        "val/rmse_best",
+        *HP_METRICS,
+    ):
         assert math.isfinite(metrics[key]), key
     plugin, scalars = hparams_in_events(out)
     assert {"_hparams_/experiment", "_hparams_/session_start_info"} <= plugin
     assert set(HP_METRICS) <= scalars
-    assert {"train/loss", "val/rmse", "test/rmse"} <= scalars
+    assert {"train/loss", "val/rmse", "test/rmse", "test/rmse_linear_ar"} <= scalars
     for name in ("rmse_per_step", "crossers", "velocity_profile", "parity_z", "pair_distances"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 5000
     assert (out / "checkpoints" / "best.ckpt").exists()

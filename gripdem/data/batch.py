@@ -34,7 +34,8 @@ class WindowBatch:
       ``B*N`` particles (sample b's particles are ``b*N .. b*N+N-1``; row 0 receives, row 1 is
       the neighbour; self pairs included), ``edge_weight (E,)`` = G_fixed, ``edge_vector (E, 3)``
       minimum-image ``r_j - r_i`` and ``edge_distance (E,)`` in particle diameters,
-      ``edge_ptr (B+1,)`` first edge of each sample.
+      ``edge_gap (E,)`` surface gap ``distance - 1`` in diameters (from float64; -1 on self
+      pairs), ``edge_ptr (B+1,)`` first edge of each sample.
     - ``crossing_mask (B, N)`` bool: crossed an x face (the LE faces in a sheared box) in one of
       the f target steps.
     - ``sim_index (B,)``, ``window_start (B,)``: simulation index and first frame of each window.
@@ -51,6 +52,7 @@ class WindowBatch:
     edge_weight: torch.Tensor
     edge_vector: torch.Tensor
     edge_distance: torch.Tensor
+    edge_gap: torch.Tensor
     edge_ptr: torch.Tensor
     crossing_mask: torch.Tensor
     sim_index: torch.Tensor
@@ -142,6 +144,7 @@ def collate_windows(samples: Sequence[dict[str, Any]]) -> WindowBatch:
         edge_weight=torch.from_numpy(np.concatenate([g.edge_weight for g in graphs])),
         edge_vector=torch.from_numpy(np.concatenate([g.edge_vector for g in graphs])),
         edge_distance=torch.from_numpy(np.concatenate([g.edge_distance for g in graphs])),
+        edge_gap=torch.from_numpy(np.concatenate([g.edge_gap for g in graphs])),
         edge_ptr=torch.from_numpy(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)),
         crossing_mask=stack("crossing_mask"),
         sim_index=torch.tensor([s["sim"] for s in samples], dtype=torch.int64),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ from gripdem.data.features import (
 from gripdem.data.graph import DEFAULT_ALPHA, Graph, build_graph
 from gripdem.data.schema import DatasetError, DatasetMeta, read_meta
 from gripdem.data.windows import PARTS, Split, WindowIndex, WindowPlan, plan_windows
+from gripdem.models.autoregressive import LinearAR
 
 __all__ = ["TrajectoryDataModule", "WindowBatch", "WindowDataset", "collate_windows"]
 
@@ -132,7 +133,8 @@ class WindowDataset(Dataset):
         k = w.history_len
         pos = self.reader.read(w.sim, w.start, w.stop).transpose(1, 0, 2)  # (N, T, 3)
         offs = self.offsets[w.sim, w.start : w.stop]
-        deltas = self.normalizer.normalize(self.encoding.encode(pos, offs)).astype(np.float32)
+        deltas = self.encoding.encode(pos, offs, anchor=k)  # unwrapped: image cell at frame k
+        deltas = self.normalizer.normalize(deltas).astype(np.float32)
         return {
             "inputs": np.ascontiguousarray(deltas[:, :k]),
             "target_deltas": np.ascontiguousarray(deltas[:, k:]),
@@ -172,7 +174,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         history_len: int | None = None,
         train_stride: int = 1,
         eval_stride: int | None = None,
-        encoding: str = "sincos",
+        encoding: str = "unwrapped",
         normalise: bool = True,
         graph_cutoff: float = 3.0,
         graph_alpha: float = DEFAULT_ALPHA,
@@ -219,6 +221,8 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.normalizer: Normalizer | None = None
         self._restored: Normalizer | None = None
         self.datasets: dict[str, WindowDataset] = {}
+        self._reader: _FrameReader | None = None
+        self._times: np.ndarray | None = None
 
     @classmethod
     def from_config(cls, data: Any, split: Any, **overrides: Any) -> TrajectoryDataModule:
@@ -251,10 +255,11 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.plan = plan_windows(meta.n_sims, meta.n_frames, self.split, **self.plan_args)
         self.encoding = make_encoding(self.encoding_name, meta.boundary)
         reader = _FrameReader(self.path)
+        self._reader, self._times = reader, times
         if self._restored is not None:
             self.normalizer = self._restored
         elif self.normalise:
-            self.normalizer = self._fit_normalizer(reader, times)
+            self.normalizer = self._fit_normalizer()
         else:
             self.normalizer = Normalizer.identity(self.encoding.n_channels, self.encoding.name)
         if self.normalizer.n_channels != self.encoding.n_channels:
@@ -279,20 +284,41 @@ class TrajectoryDataModule(L.LightningDataModule):
             for part in PARTS
         }
 
-    def _fit_normalizer(self, reader: _FrameReader, times: np.ndarray) -> Normalizer:
+    def training_trajectories(
+        self, overlap: int = 1
+    ) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+        """The frames the training windows cover, each frame range once, read in chunks of at
+        most ``_FIT_CHUNK_FRAMES`` frames that share ``overlap`` frames with the previous one:
+        ``(positions (N, T, 3) wrapped, offsets (T,) float64 or None for a periodic box)``.
+        What the normaliser and the linear AR baseline are fitted on (training data only)."""
+        if self.plan is None:
+            raise RuntimeError("call setup() first")
+        offsets = self.meta.boundary.offset(self._times)
+        le = self.meta.boundary.is_lees_edwards
+        for sim, intervals in self.plan.train.frames_used().items():
+            for a, b in intervals:
+                for lo in range(a, b - overlap, _FIT_CHUNK_FRAMES):
+                    hi = min(b, lo + _FIT_CHUNK_FRAMES + overlap)
+                    pos = self._reader.read(sim, lo, hi).transpose(1, 0, 2)
+                    yield pos, (offsets[sim, lo:hi] if le else None)
+
+    def _fit_normalizer(self) -> Normalizer:
         """Channel statistics over every step inside the frames the training windows cover
-        (each step once), read in chunks."""
-        offsets = self.meta.boundary.offset(times)
+        (each step once; the change statistics within each chunk)."""
+        return Normalizer.fit(
+            (self.encoding.encode(pos, off) for pos, off in self.training_trajectories()),
+            self.encoding.name,
+        )
 
-        def chunks():
-            for sim, intervals in self.plan.train.frames_used().items():
-                for a, b in intervals:
-                    for lo in range(a, b - 1, _FIT_CHUNK_FRAMES):
-                        hi = min(b, lo + _FIT_CHUNK_FRAMES + 1)
-                        pos = reader.read(sim, lo, hi).transpose(1, 0, 2)
-                        yield self.encoding.encode(pos, offsets[sim, lo:hi])
-
-        return Normalizer.fit(chunks(), self.encoding.name)
+    def fit_linear_ar(self, lags: int, ridge: float = 1e-6) -> LinearAR:
+        """The linear autoregressive baseline fitted on the training frames (SPEC §6)."""
+        return LinearAR.fit(
+            self.training_trajectories(overlap=lags + 1),
+            self.meta.boundary,
+            self.meta.frame_interval,
+            lags,
+            ridge,
+        )
 
     # ---- loaders -------------------------------------------------------------------------
     def _loader(self, part: str, shuffle: bool) -> DataLoader:

@@ -4,7 +4,7 @@ Every encoding turns wrapped positions into per-step deltas between consecutive 
 decode predicted deltas back to wrapped Cartesian positions. Shapes (numpy or torch, any
 leading batch axes ``...``):
 
-- ``encode(positions (..., N, T, 3), offsets (..., T)) -> deltas (..., N, T-1, C)``
+- ``encode(positions (..., N, T, 3), offsets (..., T), anchor) -> deltas (..., N, T-1, C)``
 - ``decode(last (..., N, 3), deltas (..., N, f, C), offsets (..., f)) -> (..., N, f, 3)``
 
 ``offsets`` are the float64 Lees-Edwards offsets of each frame (``None`` for a periodic box);
@@ -20,10 +20,17 @@ Channels:
   the Lees-Edwards shift ``sincos(z_{t+1}) - sincos(z~_{t+1})``, exactly zero except at steps
   that cross an x face. ``real + shift`` = the plain ``sincos`` difference. In a periodic box the
   shift channels are zero and not computed. Same layout as the authors' VCT scripts.
-- ``unwrapped`` (3): Cartesian minimum-image displacements ``displacement(p_{t+1}, p_t, δ_{t+1})``.
+- ``unwrapped`` (3): Cartesian steps of the lattice-continuous trajectory in the image cell each
+  particle occupies at the ``anchor`` frame (the last observed frame of a window):
+  :func:`gripdem.boundary.lattice_continuous_steps`. Decoding adds them up from the anchor and
+  wraps each frame with its own offset, so a constant step is exactly the constant-velocity
+  rollout with the LE shift and velocity jump of every crossing (SPEC §11). This is the frame of
+  the exact (default) decoders; ``sincos`` and ``vct`` are the paper's wrapped-space encodings.
 
 :class:`Normalizer` holds per-channel mean and std (from the training split only) as plain
-floats, so it can be stored in a checkpoint or in hyperparameters and restored.
+floats, so it can be stored in a checkpoint or in hyperparameters and restored, and the same
+statistics of the per-step change of the deltas (the velocity change that constant velocity
+misses: the target scale of the exact decoders).
 """
 
 from __future__ import annotations
@@ -40,6 +47,7 @@ from gripdem.boundary import (
     Boundary,
     Box,
     apply_lattice_shift,
+    lattice_continuous_steps,
     lattice_shift,
     sincos_decode,
     sincos_encode,
@@ -125,7 +133,9 @@ class Encoding:
     def box(self) -> Box:
         return self.boundary.box
 
-    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+    def encode(self, positions: Array, offsets: Array | None = None, anchor: int = 0) -> Array:
+        """``anchor``: the frame whose image cell the deltas refer to (read by ``unwrapped``;
+        the wrapped-space encodings do not depend on it)."""
         raise NotImplementedError
 
     def decode(self, last: Array, deltas: Array, offsets: Array | None = None) -> Array:
@@ -153,7 +163,7 @@ class SinCosEncoding(Encoding):
         """``(..., 3)`` -> ``(..., 6)`` sin/cos position features (the PCT position space)."""
         return sincos_encode(positions, self.box)
 
-    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+    def encode(self, positions: Array, offsets: Array | None = None, anchor: int = 0) -> Array:
         feats = sincos_encode(positions, self.box)
         return feats[..., 1:, :] - feats[..., :-1, :]
 
@@ -189,7 +199,7 @@ class VCTEncoding(SinCosEncoding):
         "dcos_z_shift",
     )
 
-    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
+    def encode(self, positions: Array, offsets: Array | None = None, anchor: int = 0) -> Array:
         feats = sincos_encode(positions, self.box)
         plain = feats[..., 1:, :] - feats[..., :-1, :]
         out = _cat([plain, plain[..., 4:6] * 0], plain)  # real = plain, shift = 0 ...
@@ -236,27 +246,40 @@ class VCTEncoding(SinCosEncoding):
 
 
 class UnwrappedEncoding(Encoding):
-    """3 channels: Cartesian minimum-image displacements between consecutive frames."""
+    """3 channels: Cartesian steps of the lattice-continuous trajectory, in each particle's image
+    cell at the anchor frame (the exact frame of the default decoders, SPEC §11)."""
 
     name = "unwrapped"
     n_channels = 3
     channel_names = ("dx", "dy", "dz")
 
-    def encode(self, positions: Array, offsets: Array | None = None) -> Array:
-        return step_lattice_shifts(positions, self.box, offsets)[1]
+    def _offsets(self, offsets: Array | None) -> Array | None:
+        """``(..., T)`` frame offsets -> ``(..., 1, T)`` (broadcast over particles); None when
+        the box is periodic (nothing LE-specific is computed)."""
+        if offsets is None or not self.boundary.is_lees_edwards:
+            return None
+        return offsets[..., None, :]
+
+    def encode(self, positions: Array, offsets: Array | None = None, anchor: int = 0) -> Array:
+        if self.boundary.is_lees_edwards and offsets is None:
+            raise ValueError("unwrapped encode needs the frames' offsets in a sheared box")
+        return lattice_continuous_steps(positions, self.box, self._offsets(offsets), anchor)
 
     def decode(self, last: Array, deltas: Array, offsets: Array | None = None) -> Array:
-        """Step by step: ``p_{t+1} = wrap(p_t + d_t, δ_{t+1})``, the exact inverse of
-        :meth:`encode` (each displacement is to the image continuous with the previous frame,
-        so each frame is wrapped with its own offset)."""
+        """``last + cumsum(deltas)``, each frame wrapped with its own offset: the exact inverse of
+        :meth:`encode` with ``last`` at the anchor. Summed in float64 whatever the deltas' dtype
+        (the offsets and positions are float64)."""
         self._check(deltas)
         if self.boundary.is_lees_edwards and offsets is None:
             raise ValueError("unwrapped decode needs the offsets of the predicted frames")
-        out, pos = [], last
-        for j in range(deltas.shape[-2]):
-            pos = wrap_positions(pos + deltas[..., j, :], self.box, _step_offset(offsets, j, pos))
-            out.append(pos)
-        return torch.stack(out, dim=-2) if _torch(pos) else np.stack(out, axis=-2)
+        if _torch(deltas):
+            continuous = last.double()[..., None, :] + torch.cumsum(deltas.double(), dim=-2)
+        else:
+            continuous = np.asarray(last, np.float64)[..., None, :] + np.cumsum(
+                np.asarray(deltas, np.float64), axis=-2
+            )
+        offs = self._offsets(offsets)
+        return wrap_positions(continuous, self.box, offs)
 
 
 ENCODINGS: dict[str, type[Encoding]] = {
@@ -274,24 +297,64 @@ def make_encoding(name: str, boundary: Boundary) -> Encoding:
 # --------------------------------------------------------------------------------------------
 # normalisation
 # --------------------------------------------------------------------------------------------
+class _Moments:
+    """Running per-channel mean and sum of squared deviations over ``(..., C)`` chunks, merged
+    in float64 (Chan's pairwise update)."""
+
+    def __init__(self) -> None:
+        self.n, self.mean, self.m2 = 0, None, None
+
+    def add(self, chunk: np.ndarray) -> None:
+        x = np.asarray(chunk, dtype=np.float64).reshape(-1, chunk.shape[-1])
+        if x.shape[0] == 0:
+            return
+        cm = x.mean(axis=0)
+        cm2 = ((x - cm) ** 2).sum(axis=0)
+        if self.mean is None:
+            self.n, self.mean, self.m2 = x.shape[0], cm, cm2
+            return
+        total = self.n + x.shape[0]
+        delta = cm - self.mean
+        self.mean = self.mean + delta * (x.shape[0] / total)
+        self.m2 = self.m2 + cm2 + delta**2 * (self.n * x.shape[0] / total)
+        self.n = total
+
+    def result(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mean, std)``; a channel without spread gets std 1."""
+        std = np.sqrt(self.m2 / self.n)
+        return self.mean, np.where(std > 0, std, 1.0)
+
+
 @dataclass(frozen=True)
 class Normalizer:
     """Per-channel ``(x - mean) / std``. Plain floats: store :meth:`to_dict` in a checkpoint or
     in hyperparameters and rebuild with :meth:`from_dict`. A channel with zero spread (e.g. the
-    VCT shift channels without crossings) keeps ``std = 1``."""
+    VCT shift channels without crossings) keeps ``std = 1``.
+
+    ``change_std``: per-channel spread of the change of the deltas from one step to the next
+    (for ``unwrapped``: the velocity change per frame, what constant velocity misses), the scale
+    in which the exact decoders predict; empty when it was not fitted.
+    """
 
     mean: tuple[float, ...]
     std: tuple[float, ...]
     encoding: str = ""
     count: int = 0
+    change_std: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if len(self.mean) != len(self.std):
             raise ValueError(f"mean has {len(self.mean)} channels but std {len(self.std)}")
-        if not all(math.isfinite(s) and s > 0 for s in self.std):
-            raise ValueError(f"std must be positive and finite, got {self.std}")
+        if self.change_std and len(self.change_std) != len(self.std):
+            raise ValueError(
+                f"change_std has {len(self.change_std)} channels but std {len(self.std)}"
+            )
+        for name in ("std", "change_std"):
+            values = getattr(self, name)
+            if not all(math.isfinite(s) and s > 0 for s in values):
+                raise ValueError(f"{name} must be positive and finite, got {values}")
+            object.__setattr__(self, name, tuple(float(s) for s in values))
         object.__setattr__(self, "mean", tuple(float(m) for m in self.mean))
-        object.__setattr__(self, "std", tuple(float(s) for s in self.std))
 
     @property
     def n_channels(self) -> int:
@@ -299,37 +362,29 @@ class Normalizer:
 
     @classmethod
     def identity(cls, n_channels: int, encoding: str = "") -> Normalizer:
-        return cls((0.0,) * n_channels, (1.0,) * n_channels, encoding, 0)
+        return cls((0.0,) * n_channels, (1.0,) * n_channels, encoding, 0, (1.0,) * n_channels)
 
     @classmethod
     def fit(cls, chunks: Iterable[np.ndarray], encoding: str = "") -> Normalizer:
-        """Statistics over chunks ``(..., C)`` merged in float64 (Chan's pairwise update)."""
-        n, mean, m2 = 0, None, None
+        """Statistics over chunks ``(..., steps, C)`` of consecutive deltas; the change
+        statistics use consecutive steps within each chunk."""
+        values, changes = _Moments(), _Moments()
         for chunk in chunks:
-            x = np.asarray(chunk, dtype=np.float64).reshape(-1, chunk.shape[-1])
-            if x.shape[0] == 0:
-                continue
-            cm = x.mean(axis=0)
-            cm2 = ((x - cm) ** 2).sum(axis=0)
-            if mean is None:
-                n, mean, m2 = x.shape[0], cm, cm2
-                continue
-            total = n + x.shape[0]
-            delta = cm - mean
-            mean = mean + delta * (x.shape[0] / total)
-            m2 = m2 + cm2 + delta**2 * (n * x.shape[0] / total)
-            n = total
-        if mean is None:
+            values.add(chunk)
+            if chunk.ndim >= 2 and chunk.shape[-2] >= 2:
+                changes.add(np.diff(np.asarray(chunk, np.float64), axis=-2))
+        if values.mean is None:
             raise ValueError("cannot fit a normaliser on no data")
-        std = np.sqrt(m2 / n)
-        std = np.where(std > 0, std, 1.0)
+        mean, std = values.result()
+        change_std = changes.result()[1] if changes.mean is not None else np.ones_like(std)
         if encoding == VCTEncoding.name:
             # The LE shift channels are zero except at rare crossings: their own spread would
             # blow a crossing up to hundreds of standard deviations. Scale them like the real
             # z channels (same units), centred at zero.
             mean[6:8] = 0.0
             std[6:8] = std[4:6]
-        return cls(tuple(mean), tuple(std), encoding, n)
+            change_std[6:8] = change_std[4:6]
+        return cls(tuple(mean), tuple(std), encoding, values.n, tuple(change_std))
 
     def _stats(self, like: Array) -> tuple[Array, Array]:
         if _torch(like):
@@ -351,6 +406,7 @@ class Normalizer:
             "mean": list(self.mean),
             "std": list(self.std),
             "count": self.count,
+            "change_std": list(self.change_std),
         }
 
     @classmethod
@@ -360,4 +416,5 @@ class Normalizer:
             tuple(state["std"]),
             state.get("encoding", ""),
             int(state.get("count", 0)),
+            tuple(state.get("change_std", ())),
         )

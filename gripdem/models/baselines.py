@@ -9,6 +9,8 @@ predicted frames, and return predictions ``(windows, horizon, particles, 3)`` wr
   later frame's offset), extrapolated in lattice-continuous coordinates and wrapped with each
   predicted frame's own offset, so a particle crossing an LE face gets the z shift and the
   velocity jump (SPEC §2).
+- ``linear_ar``: the per-particle linear autoregressive filter fitted on the training windows
+  (:mod:`gripdem.models.autoregressive`), LE-exact like constant velocity.
 - ``mean_flow``: the imposed profile (``cosine``: u_z = A cos(2 pi x / lx) + B for the periodic
   scene, ``linear``: u_z = S x + B for the LE scene) fitted by least squares on the observed
   displacements of each window; particles advance along z at the fitted u_z(x).
@@ -20,9 +22,10 @@ import math
 
 import torch
 
-from gripdem.boundary import Box, displacement, wrap_positions
+from gripdem.boundary import Boundary, Box, displacement, wrap_positions
+from gripdem.models.autoregressive import LinearAR
 
-BASELINES = ("stay", "constant_velocity", "mean_flow")
+BASELINES = ("stay", "constant_velocity", "linear_ar", "mean_flow")
 PROFILES = ("cosine", "linear")
 
 
@@ -89,13 +92,25 @@ def mean_flow(observed, observed_offsets, target_offsets, box: Box, profile: str
 
 
 def predict_baseline(
-    name: str, observed, observed_offsets, target_offsets, box: Box, profile: str
+    name: str,
+    observed,
+    observed_offsets,
+    target_offsets,
+    box: Box,
+    profile: str,
+    linear_ar: LinearAR | None = None,
+    boundary: Boundary | None = None,
 ) -> torch.Tensor:
-    """Dispatch by name (one of :data:`BASELINES`)."""
+    """Dispatch by name (one of :data:`BASELINES`); ``linear_ar`` needs the fitted filter and
+    the boundary."""
     if name == "stay":
         return stay(observed, _t(target_offsets).shape[1])
     if name == "constant_velocity":
         return constant_velocity(observed, observed_offsets, target_offsets, box)
     if name == "mean_flow":
         return mean_flow(observed, observed_offsets, target_offsets, box, profile)
+    if name == "linear_ar":
+        if linear_ar is None or boundary is None:
+            raise ValueError("baseline 'linear_ar' needs the fitted filter and the boundary")
+        return linear_ar.predict(_t(observed), observed_offsets, target_offsets, boundary)
     raise ValueError(f"baseline must be one of {BASELINES}, got {name!r}")

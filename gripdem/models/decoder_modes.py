@@ -1,27 +1,34 @@
-"""How each decoder mode (SPEC §5) feeds, advances and decodes the seq2seq GRU.
+"""How each decoder mode (SPEC §5) feeds, advances, decodes and trains the seq2seq GRU.
 
-One class per concern would scatter three short recipes; this module keeps them side by side:
+Two frames, chosen by the encoding (one source of truth):
 
-=======  ====================  ========================  ===============================
-mode     decoder state         GRU output per step       loss
-=======  ====================  ========================  ===============================
-grip     last velocity (norm)  change of velocity        cumulative deltas (positions
-                                                         relative to the last frame)
-pct      position features     normalised delta          same as grip
-vct      sin/cos position (6)  normalised 8-ch delta     normalised 8-ch deltas (the
-                                                         shift channels are not used by
-                                                         ``exact``, so not in its loss)
-=======  ====================  ========================  ===============================
+**Exact (default, encoding ``unwrapped``)**: inputs, decoder state and outputs live in
+lattice-continuous Cartesian coordinates anchored at the last observed frame
+(:func:`gripdem.boundary.lattice_continuous_steps`). The network predicts what constant
+velocity (CV) misses, in units of the per-step velocity change of the training data
+(``Normalizer.change_std``); positions are ``last + cumsum(v0 + deviation)`` in float64 and each
+predicted frame is wrapped with its own offset, so the LE shift and the velocity jump of a
+crossing are applied analytically (SPEC §11). With every learned output zero a model IS the CV
+baseline (to float64 round-off), in both scenes, at every split.
 
-Positions "relative to the last frame" are compared in normalised units
-(``cumsum(deltas) / std``): for ``sincos`` this is the paper's sin/cos position loss scaled to
-order one per channel.
+=======  ===========================  ==========================  =========================
+mode     decoder state                GRU output per step         loss (relative to CV's)
+=======  ===========================  ==========================  =========================
+grip     velocity (normalised)        velocity change             positions over the horizon
+pct      position (box lengths)       step deviation from CV      positions over the horizon
+vct      position (box lengths)       step deviation from CV      per-step displacements
+=======  ===========================  ==========================  =========================
 
-Initial state (zero-initialised output heads): ``grip`` repeats the last observed velocity
-(constant velocity along a chord in feature space: exact for small steps, not for LE crossers
-or long horizons); ``pct`` and ``vct`` add the last observed delta each step when
-``residual_base = constant_velocity`` (the default; the same chord), or stay in place when
-``residual_base = stay``.
+The losses are ``mean|pred - true|^2 / mean|true - CV|^2`` on the batch: 1 at the start, and the
+square of the RMSE ratio to CV when trained on positions. In this frame PCT and VCT differ by
+their loss only: VCT's LE shift channels are replaced by the analytic LE handling.
+
+**Paper (encodings ``sincos`` and ``vct``)**, for reproduction: the paper's wrapped sin/cos
+space (SPEC §5). ``grip`` repeats the last observed velocity (CV along a chord in feature space:
+not exact for LE crossers), ``pct`` / ``vct`` add the last observed delta per step
+(``residual_base = constant_velocity``) or stay; the loss is the MSE of normalised cumulative
+deltas (grip/pct) or of the 8-channel deltas (vct; ``vct_shift=exact`` drops the shift channels
+and applies the known shift when decoding, SPEC §8).
 """
 
 from __future__ import annotations
@@ -30,11 +37,18 @@ from dataclasses import dataclass
 
 import torch
 
+from gripdem.boundary import Boundary, lattice_continuous_steps
 from gripdem.data.features import Encoding, Normalizer
 
 DECODER_MODES = ("grip", "pct", "vct")
 VCT_SHIFTS = ("learned", "exact")
 RESIDUAL_BASES = ("constant_velocity", "stay")
+#: the encoding of the exact frame; the others are the paper's wrapped-space encodings
+EXACT_ENCODING = "unwrapped"
+
+
+def is_exact(encoding: str) -> bool:
+    return encoding == EXACT_ENCODING
 
 
 def check_mode(mode: str, encoding: str, vct_shift: str, residual_base: str) -> None:
@@ -47,18 +61,28 @@ def check_mode(mode: str, encoding: str, vct_shift: str, residual_base: str) -> 
         raise ValueError(
             f"model.residual_base must be one of {RESIDUAL_BASES}, got {residual_base!r}"
         )
+    if is_exact(encoding):
+        if residual_base != "constant_velocity":
+            raise ValueError(
+                "model.residual_base=stay is only read by the paper's encodings (sincos, vct); "
+                "the exact frame (encoding unwrapped) always starts from constant velocity"
+            )
+        return
     if mode == "vct" and encoding != "vct":
-        raise ValueError(f"model.decoder_mode=vct needs data.encoding=vct, got {encoding!r}")
+        raise ValueError(
+            f"model.decoder_mode=vct needs data.encoding=vct (the paper) or unwrapped (exact), "
+            f"got {encoding!r}"
+        )
     if mode != "vct" and encoding == "vct":
         raise ValueError(
             f"data.encoding=vct is only read by model.decoder_mode=vct (got {mode!r}); "
-            "use sincos or unwrapped"
+            "use unwrapped (exact) or sincos (the paper)"
         )
 
 
 @dataclass
 class ModeLayout:
-    """Channel counts and the affine state update ``state += out @ fold + shift``."""
+    """Channel counts and the affine state update ``state += out @ fold + shift (+ drift)``."""
 
     state_channels: int
     out_channels: int
@@ -66,24 +90,21 @@ class ModeLayout:
     shift: torch.Tensor
 
 
-def position_state_scale(encoding: Encoding) -> torch.Tensor:
-    """Per-channel factor from deltas to position-state units: 1 for sin/cos features, 1/l
-    for Cartesian (``unwrapped``) positions, which are fed in box lengths."""
-    if encoding.name == "unwrapped":
-        return torch.tensor(1.0 / encoding.box.lengths, dtype=torch.float32)
-    return torch.ones(6)
-
-
 def layout(mode: str, encoding: Encoding, normalizer: Normalizer) -> ModeLayout:
     channels = encoding.n_channels
     std = torch.tensor(normalizer.std, dtype=torch.float32)
     mean = torch.tensor(normalizer.mean, dtype=torch.float32)
+    if is_exact(encoding.name):
+        change = torch.tensor(normalizer.change_std, dtype=torch.float32)
+        if mode == "grip":  # normalised velocity += velocity change
+            return ModeLayout(3, 3, torch.diag(change / std), torch.zeros(3))
+        lengths = torch.tensor(encoding.box.lengths, dtype=torch.float32)
+        return ModeLayout(3, 3, torch.diag(change / lengths), torch.zeros(3))
     if mode == "grip":
         eye = torch.eye(channels)
         return ModeLayout(channels, channels, eye, torch.zeros(channels))
     if mode == "pct":
-        scale = position_state_scale(encoding)
-        return ModeLayout(channels, channels, torch.diag(std * scale), mean * scale)
+        return ModeLayout(channels, channels, torch.diag(std), mean)
     # vct: 8 output channels folded onto 6 sin/cos position channels (real + shift on z)
     combine = torch.zeros(8, 6)
     combine[:6, :6] = torch.eye(6)
@@ -97,17 +118,29 @@ def initial_state(mode: str, encoding: Encoding, last_positions: torch.Tensor, i
     inputs: normalised input deltas ``(batch, particles, K, C)``."""
     if mode == "grip":
         return inputs[:, :, -1]
-    if encoding.name == "unwrapped":
+    if is_exact(encoding.name):
         lengths = torch.as_tensor(encoding.box.lengths, device=last_positions.device)
         return (last_positions / lengths).to(inputs.dtype)
     return encoding.position_features(last_positions).to(inputs.dtype)
 
 
-def residual_base(
-    mode: str, base: str, inputs: torch.Tensor, normalizer: Normalizer
+def state_drift(
+    mode: str, encoding: Encoding, last_step: torch.Tensor | None
 ) -> torch.Tensor | None:
-    """Constant added to every GRU output (``None`` for ``grip``, whose state carries it)."""
-    if mode == "grip":
+    """Per-node addition to the state each step ``(batch, particles, S)``: the CV step of the
+    exact position state (``last_step`` float64 ``(B, N, 3)``), None otherwise."""
+    if not is_exact(encoding.name) or mode == "grip":
+        return None
+    lengths = torch.as_tensor(encoding.box.lengths, device=last_step.device)
+    return (last_step / lengths).float()
+
+
+def residual_base(
+    mode: str, base: str, encoding: Encoding, inputs: torch.Tensor, normalizer: Normalizer
+) -> torch.Tensor | None:
+    """Constant added to every GRU output (None: grip, and the exact frame, whose zero output
+    is the constant-velocity deviation of zero)."""
+    if mode == "grip" or is_exact(encoding.name):
         return None
     zero = normalizer.normalize(torch.zeros_like(inputs[:, :, -1]))
     if base == "stay":
@@ -118,17 +151,65 @@ def residual_base(
     return last
 
 
-def outputs_to_deltas(mode: str, outputs, inputs, normalizer: Normalizer) -> torch.Tensor:
-    """Normalised per-step deltas ``(batch, particles, f, C)`` from the GRU outputs."""
+def outputs_to_deltas(mode: str, exact: bool, outputs, inputs) -> torch.Tensor:
+    """``(batch, particles, f, C)`` from the GRU outputs: normalised per-step deltas (paper) or
+    the per-step deviation from CV in units of the velocity change (exact)."""
     if mode == "grip":
+        if exact:
+            return torch.cumsum(outputs, dim=2)  # velocity changes add up to the deviation
         return inputs[:, :, -1:] + torch.cumsum(outputs, dim=2)
     return outputs
 
 
 def loss_terms(mode: str, vct_shift: str, pred_norm: torch.Tensor, true_norm: torch.Tensor):
-    """The trained quantity of each mode from normalised deltas ``(batch, particles, f, C)``."""
+    """Paper frame: the trained quantity of each mode from normalised deltas ``(B, N, f, C)``."""
     if mode == "vct":
         if vct_shift == "exact":
             return pred_norm[..., :6], true_norm[..., :6]
         return pred_norm, true_norm
     return torch.cumsum(pred_norm, dim=2), torch.cumsum(true_norm, dim=2)
+
+
+def exact_loss(mode: str, deviation: torch.Tensor, true_deviation: torch.Tensor) -> torch.Tensor:
+    """Exact frame: ``mean|pred - true|^2 / mean|true|^2`` of positions over the horizon
+    (grip, pct: cumulative deviations) or of per-step displacements (vct); the deviations are
+    ``(B, N, f, 3)`` from CV in units of the velocity change, so the denominator is CV's loss."""
+    if mode != "vct":
+        deviation, true_deviation = (
+            torch.cumsum(deviation, dim=2),
+            torch.cumsum(true_deviation, dim=2),
+        )
+    cv = torch.mean(true_deviation**2).detach()
+    return torch.mean((deviation - true_deviation) ** 2) / cv.clamp_min(1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# the exact frame from a batch (float64)
+# --------------------------------------------------------------------------------------------
+def history_steps(batch, boundary: Boundary) -> torch.Tensor:
+    """Observed steps ``(B, N, K, 3)`` float64, lattice-continuous, anchored at the last
+    observed frame (the last one is the CV step ``v0``)."""
+    positions = batch.input_positions.double()
+    offsets = batch.input_offsets.double()[:, None, :] if boundary.is_lees_edwards else None
+    return lattice_continuous_steps(positions, boundary.box, offsets, anchor=-1)
+
+
+def last_step(batch, boundary: Boundary) -> torch.Tensor:
+    """The CV step ``v0`` ``(B, N, 3)`` float64 (anchored at the last observed frame)."""
+    positions = batch.input_positions[:, :, -2:].double()
+    offsets = batch.input_offsets[:, -2:].double()[:, None, :] if boundary.is_lees_edwards else None
+    return lattice_continuous_steps(positions, boundary.box, offsets, anchor=-1)[:, :, 0]
+
+
+def target_steps(batch, boundary: Boundary) -> torch.Tensor:
+    """True steps over the horizon ``(B, N, f, 3)`` float64, anchored at the last observed
+    frame (the first from the last observed frame to the first target)."""
+    positions = torch.cat(
+        [batch.last_positions.double()[:, :, None], batch.target_positions.double()], dim=2
+    )
+    offsets = None
+    if boundary.is_lees_edwards:
+        offsets = torch.cat(
+            [batch.input_offsets[:, -1:].double(), batch.target_offsets.double()], dim=1
+        )[:, None, :]
+    return lattice_continuous_steps(positions, boundary.box, offsets, anchor=0)

@@ -1,27 +1,59 @@
-"""One LightningModule for GRIP++, PCT and VCT; the decoder mode comes from config.
+"""One LightningModule for GRIP++, PCT and VCT; the decoder mode and the encoder come from config.
 
 Training minimises the mode's loss (see :mod:`gripdem.models.decoder_modes`); validation and
 test roll the model out over the horizon, decode to wrapped Cartesian positions and score them
 with the LE-aware RMSE of :mod:`gripdem.metrics`, beside the baselines on the same windows.
 The best checkpoint is chosen on ``val/rmse`` (the rollout), not on the training loss.
+
+Encoders (``encoder["name"]``): ``graph_conv`` (the paper's graph convolution on the fixed
+graph, :mod:`gripdem.nn.graph_conv`) and ``interaction`` (learned pair messages from relative
+geometry and motion, :mod:`gripdem.nn.interaction`; needs the exact frame).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import lightning as L
 import numpy as np
 import torch
 
-from gripdem.boundary import Boundary, Box, LeesEdwards
+from gripdem.boundary import (
+    Boundary,
+    Box,
+    LeesEdwards,
+    affine_flow_strain,
+    remove_affine_flow,
+    step_start_x,
+)
 from gripdem.data.features import Normalizer, make_encoding
 from gripdem.metrics import position_residuals, rmse_per_step, rmse_split
 from gripdem.models import decoder_modes as modes
+from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES, predict_baseline
 from gripdem.nn.graph_conv import EdgeGraph, GraphConvEncoder
+from gripdem.nn.interaction import ContactGraph, InteractionEncoder
 from gripdem.nn.seq2seq import TrajectoryDecoder
+
+ENCODERS = ("graph_conv", "interaction")
+#: the options each encoder reads from ``model.encoder`` (``name`` and ``cutoff`` are shared:
+#: the cut-off is the data's graph cut-off, ``data.graph_cutoff`` follows it)
+ENCODER_OPTIONS = {
+    "graph_conv": (
+        "channels",
+        "n_blocks",
+        "temporal_kernel",
+        "dropout",
+        "trainable_graph",
+        "edge_feature_dim",
+        "dense_init",
+    ),
+    "interaction": ("channels", "rounds", "edge_history", "position_features"),
+}
+LR_SCHEDULES = ("constant", "cosine")
+POSITION_FEATURES = ("auto", "true", "false")
 
 
 def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
@@ -32,23 +64,38 @@ def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
     return Boundary(box)
 
 
+def _uses_position_features(setting: Any, boundary: Boundary) -> bool:
+    """x-position features for the interaction encoder: the periodic drive depends on x; the
+    sheared cell is homogeneous (``auto``)."""
+    setting = str(setting).lower()
+    if setting not in POSITION_FEATURES:
+        raise ValueError(
+            f"model.encoder.position_features must be one of {POSITION_FEATURES}, got {setting!r}"
+        )
+    return not boundary.is_lees_edwards if setting == "auto" else setting == "true"
+
+
 class TrajectoryModule(L.LightningModule):
-    """GRIP++ / PCT / VCT on a sparse graph-conv encoder.
+    """GRIP++ / PCT / VCT on a graph encoder and the seq2seq GRU block.
 
     Args:
         scene: ``box``, ``boundary``, ``shear_rate``, ``le_sign``, ``le_time_origin``,
-            ``diameter`` of the data (plain values, saved with the model).
+            ``diameter`` and ``frame_interval`` of the data (plain values, saved with the model).
         normalizer: :meth:`Normalizer.to_dict` of the training split's statistics.
-        encoding: ``sincos`` | ``vct`` | ``unwrapped``.
-        horizon: predicted frames f.
-        decoder_mode: ``grip`` | ``pct`` | ``vct``; vct_shift: ``learned`` | ``exact``;
-        residual_base: ``constant_velocity`` | ``stay`` (start of pct/vct, see decoder_modes).
-        encoder: kwargs of :class:`GraphConvEncoder` (channels, n_blocks, trainable_graph, ...).
+        encoding: ``unwrapped`` (exact frame, default) | ``sincos`` | ``vct`` (the paper's).
+        horizon: predicted frames f. history_len: observed steps K the model reads.
+        decoder_mode: ``grip`` | ``pct`` | ``vct``; vct_shift: ``learned`` | ``exact`` (paper
+            frame only); residual_base: ``constant_velocity`` | ``stay`` (paper pct/vct only).
+        encoder: ``name`` (``graph_conv`` | ``interaction``) and that encoder's options.
         hidden, layers, n_heads, decoder_dropout: the seq2seq GRU networks.
-        lr, weight_decay: Adam.
+        lr, weight_decay: Adam (AdamW when weight_decay > 0); lr_schedule: ``constant`` |
+            ``cosine`` (linear warm-up over ``warmup_fraction`` of the steps, then cosine to 0).
+        input_noise: training-time Gaussian noise on the encoder's input steps, in units of
+            the per-step velocity change (0: off).
         n_particles: needed only by ``trainable_graph=dense``.
-        graph_cutoff: the graph's cut-off in diameters (scales the learned edge features).
+        graph_cutoff: the graph's cut-off in diameters (scales the edge features).
         profile: mean-flow baseline profile (``cosine`` | ``linear``; default by boundary).
+        linear_ar: :meth:`LinearAR.to_dict` of the fitted AR baseline (None: not reported).
     """
 
     def __init__(
@@ -57,6 +104,7 @@ class TrajectoryModule(L.LightningModule):
         normalizer: dict[str, Any],
         encoding: str,
         horizon: int,
+        history_len: int | None = None,
         decoder_mode: str = "grip",
         vct_shift: str = "learned",
         residual_base: str = "constant_velocity",
@@ -67,31 +115,41 @@ class TrajectoryModule(L.LightningModule):
         decoder_dropout: float = 0.0,
         lr: float = 1e-4,
         weight_decay: float = 0.0,
+        lr_schedule: str = "constant",
+        warmup_fraction: float = 0.05,
+        input_noise: float = 0.0,
         n_particles: int | None = None,
         graph_cutoff: float = 3.0,
         profile: str | None = None,
+        linear_ar: dict[str, Any] | None = None,
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)
         modes.check_mode(decoder_mode, encoding, vct_shift, residual_base)
+        if lr_schedule not in LR_SCHEDULES:
+            raise ValueError(
+                f"model.lr_schedule must be one of {LR_SCHEDULES}, got {lr_schedule!r}"
+            )
         self.boundary = boundary_from_hparams(scene)
         self.diameter = float(scene["diameter"])
+        self.strain = affine_flow_strain(self.boundary, float(scene.get("frame_interval", 0.0)))
         self.encoding = make_encoding(encoding, self.boundary)
+        self.exact = modes.is_exact(encoding)
         self.normalizer = Normalizer.from_dict(normalizer)
         if self.normalizer.n_channels != self.encoding.n_channels:
             raise ValueError(
                 f"normaliser has {self.normalizer.n_channels} channels, encoding {encoding!r} "
                 f"has {self.encoding.n_channels}"
             )
+        if self.exact and not self.normalizer.change_std:
+            raise ValueError("the exact frame needs the normaliser's change statistics")
         self.profile = profile or ("linear" if self.boundary.is_lees_edwards else "cosine")
-        encoder_kwargs = dict(encoder or {})
-        self.encoder = GraphConvEncoder(
-            self.encoding.n_channels, n_particles=n_particles, **encoder_kwargs
-        )
-        channels = self.encoder.lift.out_features
+        self.linear_ar = None if linear_ar is None else LinearAR.from_dict(linear_ar)
+        self.baselines = tuple(b for b in BASELINES if b != "linear_ar" or self.linear_ar)
+        self.encoder_name, self.encoder = self._build_encoder(dict(encoder or {}), n_particles)
         lay = modes.layout(decoder_mode, self.encoding, self.normalizer)
         self.decoder = TrajectoryDecoder(
-            channels,
+            self.encoder.out_channels,
             lay.state_channels,
             lay.out_channels,
             hidden=hidden,
@@ -100,24 +158,89 @@ class TrajectoryModule(L.LightningModule):
             dropout=decoder_dropout,
             fold=lay.fold,
             shift=lay.shift,
+            context=self.encoder.context,
+        )
+        self.register_buffer(
+            "change_std", torch.tensor(self.normalizer.change_std or (1.0,), dtype=torch.float64)
         )
         self._eval_store: dict[str, list] = {}
+        self.accuracy_curve: list[tuple[float, int, float]] = []
+        self._fit_started: float | None = None
+
+    def _build_encoder(self, cfg: dict[str, Any], n_particles: int | None):
+        """The encoder named ``cfg["name"]`` with its own options (the shared config schema
+        holds the options of both; each reads its own)."""
+        name = cfg.get("name", "graph_conv")
+        if name not in ENCODERS:
+            raise ValueError(f"model.encoder.name must be one of {ENCODERS}, got {name!r}")
+        options = {k: v for k, v in cfg.items() if k in ENCODER_OPTIONS[name]}
+        if name == "graph_conv":
+            return name, GraphConvEncoder(
+                self.encoding.n_channels, n_particles=n_particles, **options
+            )
+        if not self.exact:
+            raise ValueError(
+                "model.encoder.name=interaction reads Cartesian steps: it needs the exact frame "
+                f"(model.encoding=unwrapped), got {self.encoding.name!r}"
+            )
+        if self.hparams.history_len is None:
+            raise ValueError("the interaction encoder needs history_len")
+        self.position_features = _uses_position_features(
+            options.pop("position_features", "auto"), self.boundary
+        )
+        static = 2 if self.position_features else 0
+        return name, InteractionEncoder(int(self.hparams.history_len), static, **options)
 
     # ----------------------------------------------------------------------------------------
     # forward
     # ----------------------------------------------------------------------------------------
-    def forward(
-        self, inputs: torch.Tensor, last_positions: torch.Tensor, graph: EdgeGraph
-    ) -> torch.Tensor:
-        """inputs ``(batch, particles, K, C)`` normalised deltas, last_positions
-        ``(batch, particles, 3)`` wrapped -> normalised predicted deltas
-        ``(batch, particles, horizon, C)``."""
+    @property
+    def velocity_unit(self) -> float:
+        """Spread of the steps across the flow (x and y: no mean flow in either scene), in
+        metres per frame: the unit of the interaction encoder's inputs."""
+        std = self.normalizer.std
+        return math.sqrt(0.5 * (std[0] ** 2 + std[1] ** 2))
+
+    def _interaction_inputs(self, batch) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Flow-relative steps ``(B, N, K, 3)`` in velocity units and, where the drive depends
+        on x, ``sin``/``cos`` of x at the last observed frame ``(B, N, 2)``."""
+        steps = modes.history_steps(batch, self.boundary)
+        x_start = step_start_x(steps, batch.last_positions[..., 0].double())
+        relative = (remove_affine_flow(steps, x_start, self.strain) / self.velocity_unit).float()
+        if self.training and self.hparams.input_noise > 0:
+            scale = self.hparams.input_noise * float(self.change_std.mean()) / self.velocity_unit
+            relative = relative + scale * torch.randn_like(relative)
+        static = None
+        if self.position_features:
+            theta = 2 * math.pi * batch.last_positions[..., 0] / self.boundary.box.lx
+            static = torch.stack([torch.sin(theta), torch.cos(theta)], -1).float()
+        return relative, static
+
+    def _encode(self, batch) -> torch.Tensor:
+        """Per-particle features ``(B, N, T, C)`` for the seq2seq block."""
+        if self.encoder_name == "interaction":
+            history, static = self._interaction_inputs(batch)
+            return self.encoder(history, static, self.contact_graph(batch))
+        inputs = batch.inputs
+        if self.training and self.hparams.input_noise > 0:
+            inputs = inputs + self.hparams.input_noise * torch.randn_like(inputs)
+        return self.encoder(inputs, self.graph(batch))
+
+    def forward(self, batch) -> torch.Tensor:
+        """A :class:`~gripdem.data.batch.WindowBatch` -> ``(B, N, horizon, C)``: normalised
+        per-step deltas (paper frame) or the per-step deviation from constant velocity in units
+        of the velocity change (exact frame, ``C = 3``)."""
         mode = self.hparams.decoder_mode
-        features = self.encoder(inputs, graph)
-        state = modes.initial_state(mode, self.encoding, last_positions, inputs)
-        base = modes.residual_base(mode, self.hparams.residual_base, inputs, self.normalizer)
-        outputs = self.decoder(features, state, base, self.hparams.horizon)
-        return modes.outputs_to_deltas(mode, outputs, inputs, self.normalizer)
+        features = self._encode(batch)
+        state = modes.initial_state(mode, self.encoding, batch.last_positions, batch.inputs)
+        base = modes.residual_base(
+            mode, self.hparams.residual_base, self.encoding, batch.inputs, self.normalizer
+        )
+        drift = None
+        if self.exact and mode != "grip":
+            drift = modes.state_drift(mode, self.encoding, modes.last_step(batch, self.boundary))
+        outputs = self.decoder(features, state, base, self.hparams.horizon, drift)
+        return modes.outputs_to_deltas(mode, self.exact, outputs, batch.inputs)
 
     def graph(self, batch) -> EdgeGraph:
         """The batch's fixed graph with edge features ``(E, 4)``: minimum-image vector and
@@ -130,11 +253,26 @@ class TrajectoryModule(L.LightningModule):
             batch.inputs.shape[0] * batch.inputs.shape[1],
         )
 
-    def decode(self, pred_norm: torch.Tensor, batch) -> torch.Tensor:
-        """Normalised deltas -> wrapped positions ``(batch, horizon, particles, 3)`` float64."""
-        deltas = self.normalizer.denormalize(pred_norm.double())
+    def contact_graph(self, batch) -> ContactGraph:
+        """The batch's neighbour pairs without the self pairs (interaction encoder)."""
+        keep = batch.edge_index[0] != batch.edge_index[1]
+        return ContactGraph(
+            batch.edge_index[:, keep],
+            batch.edge_vector[keep],
+            batch.edge_gap[keep],
+            float(self.hparams.graph_cutoff),
+            batch.inputs.shape[0] * batch.inputs.shape[1],
+        )
+
+    def decode(self, pred: torch.Tensor, batch) -> torch.Tensor:
+        """Model output -> wrapped positions ``(batch, horizon, particles, 3)`` float64."""
         last = batch.last_positions.double()
         offsets = batch.target_offsets.double() if self.boundary.is_lees_edwards else None
+        if self.exact:
+            v0 = modes.last_step(batch, self.boundary)[:, :, None]
+            steps = v0 + pred.double() * self.change_std
+            return self.encoding.decode(last, steps, offsets).transpose(1, 2)
+        deltas = self.normalizer.denormalize(pred.double())
         if self.hparams.decoder_mode == "vct":
             exact = self.hparams.vct_shift == "exact"
             positions = self.encoding.decode(last, deltas, offsets, exact_shift=exact)
@@ -142,18 +280,28 @@ class TrajectoryModule(L.LightningModule):
             positions = self.encoding.decode(last, deltas, offsets)
         return positions.transpose(1, 2)
 
-    def _loss(self, pred_norm: torch.Tensor, batch) -> torch.Tensor:
-        pred, true = modes.loss_terms(
-            self.hparams.decoder_mode, self.hparams.vct_shift, pred_norm, batch.target_deltas
-        )
+    def true_deviation(self, batch, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+        """Exact frame: the true per-step deviation from CV in units of the velocity change
+        ``(B, N, f, 3)`` (computed in float64, returned as ``dtype``)."""
+        steps = modes.target_steps(batch, self.boundary)
+        v0 = modes.last_step(batch, self.boundary)[:, :, None]
+        return ((steps - v0) / self.change_std).to(dtype)
+
+    def _loss(self, pred: torch.Tensor, batch) -> torch.Tensor:
+        mode = self.hparams.decoder_mode
+        if self.exact:
+            return modes.exact_loss(mode, pred, self.true_deviation(batch))
+        pred, true = modes.loss_terms(mode, self.hparams.vct_shift, pred, batch.target_deltas)
         return torch.mean((pred - true) ** 2)
 
     # ----------------------------------------------------------------------------------------
     # steps
     # ----------------------------------------------------------------------------------------
+    def on_train_start(self) -> None:
+        self._fit_started = time.perf_counter()
+
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
-        pred = self(batch.inputs, batch.last_positions, self.graph(batch))
-        loss = self._loss(pred, batch)
+        loss = self._loss(self(batch), batch)
         if not torch.isfinite(loss):
             raise FloatingPointError(
                 f"non-finite training loss ({loss.item()}) at global step {self.global_step} "
@@ -164,10 +312,23 @@ class TrajectoryModule(L.LightningModule):
         self.log("train/loss", loss, prog_bar=True, batch_size=batch.inputs.shape[0])
         return loss
 
+    def predict_baselines(self, batch) -> dict[str, torch.Tensor]:
+        """Every baseline's wrapped positions ``(B, f, N, 3)`` on the batch's windows."""
+        observed = batch.input_positions.double().transpose(1, 2)
+        in_off = batch.input_offsets.double()
+        out_off = batch.target_offsets.double()
+        box = self.boundary.box
+        return {
+            name: predict_baseline(
+                name, observed, in_off, out_off, box, self.profile, self.linear_ar, self.boundary
+            )
+            for name in self.baselines
+        }
+
     def _evaluate(self, batch, stage: str) -> None:
-        pred_norm = self(batch.inputs, batch.last_positions, self.graph(batch))
-        loss = self._loss(pred_norm, batch)
-        positions = self.decode(pred_norm, batch)
+        pred = self(batch)
+        loss = self._loss(pred, batch)
+        positions = self.decode(pred, batch)
         if not torch.isfinite(positions).all():
             raise FloatingPointError(
                 f"non-finite predicted positions in {stage} at global step {self.global_step}"
@@ -187,17 +348,7 @@ class TrajectoryModule(L.LightningModule):
             "sim_index": batch.sim_index.cpu(),
             "window_start": batch.window_start.cpu(),
         }
-        observed = batch.input_positions.double().transpose(1, 2)
-        in_off = batch.input_offsets.double()
-        for name in BASELINES:
-            record[name] = predict_baseline(
-                name,
-                observed,
-                in_off,
-                batch.target_offsets.double(),
-                self.boundary.box,
-                self.profile,
-            ).cpu()
+        record.update({k: v.cpu() for k, v in self.predict_baselines(batch).items()})
         store.append(record)
 
     def validation_step(self, batch, batch_idx: int) -> None:
@@ -211,7 +362,8 @@ class TrajectoryModule(L.LightningModule):
         if not records:
             return {}
         out: dict[str, Any] = {}
-        for key in ("pred", "true", "last", "times", "sim_index", "window_start", *BASELINES):
+        keys = ("pred", "true", "last", "times", "sim_index", "window_start", *self.baselines)
+        for key in keys:
             out[key] = torch.cat([r[key] for r in records])
         out["offsets"] = (
             None if records[0]["offsets"] is None else torch.cat([r["offsets"] for r in records])
@@ -242,8 +394,11 @@ class TrajectoryModule(L.LightningModule):
         per_step = score(data["pred"], "rmse")
         for step, value in enumerate(per_step, start=1):
             metrics[f"{stage}/rmse_step/{step:03d}"] = float(value)
-        for name in BASELINES:
+        for name in self.baselines:
             score(data[name], f"rmse_{name}")
+            metrics[f"{stage}/rmse_ratio_{name}"] = (
+                metrics[f"{stage}/rmse"] / metrics[f"{stage}/rmse_{name}"]
+            )
         return metrics
 
     def _end_of_eval(self, stage: str) -> dict[str, Any]:
@@ -258,12 +413,33 @@ class TrajectoryModule(L.LightningModule):
         return data
 
     def on_validation_epoch_end(self) -> None:
-        self._end_of_eval("val")
+        data = self._end_of_eval("val")
+        if data and self._fit_started is not None and not self.trainer.sanity_checking:
+            seconds = time.perf_counter() - self._fit_started
+            ratio = data["metrics"]["val/rmse_ratio_constant_velocity"]
+            self.accuracy_curve.append((seconds, int(self.global_step), float(ratio)))
 
     def on_test_epoch_end(self) -> None:
         self.test_results = self._end_of_eval("test")
 
     def configure_optimizers(self):
-        return torch.optim.Adam(
-            self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
-        )
+        params = self.parameters()
+        if self.hparams.weight_decay > 0:
+            opt = torch.optim.AdamW(
+                params, lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
+            )
+        else:
+            opt = torch.optim.Adam(params, lr=self.hparams.lr)
+        if self.hparams.lr_schedule == "constant":
+            return opt
+        total = max(1, int(self.trainer.estimated_stepping_batches))
+        warmup = max(1, int(self.hparams.warmup_fraction * total))
+
+        def factor(step: int) -> float:
+            if step < warmup:
+                return (step + 1) / warmup
+            progress = min(1.0, (step - warmup) / max(1, total - warmup))
+            return 0.5 * (1.0 + math.cos(math.pi * progress))
+
+        scheduler = torch.optim.lr_scheduler.LambdaLR(opt, factor)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}

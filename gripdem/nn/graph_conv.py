@@ -223,6 +223,13 @@ class GraphConvEncoder(nn.Module):
             for _ in range(n_blocks)
         )
 
+    @property
+    def out_channels(self) -> int:
+        return self.lift.out_features
+
+    #: the seq2seq block reads the features over time (see gripdem.nn.seq2seq)
+    context = "sequence"
+
     def forward(self, x: torch.Tensor, graph: EdgeGraph) -> torch.Tensor:
         """x: ``(batch, particles, time, in_channels)`` -> ``(..., channels)``."""
         y = _batch_norm(self.bn_lift, self.lift(x))

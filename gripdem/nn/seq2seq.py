@@ -6,7 +6,8 @@ fused multi-layer GRU, then decodes ``horizon`` steps autoregressively. The deco
 an *output* per step; the state advances by a fixed linear map of the output::
 
     output_k = head(GRU(state_{k-1}, h)) + base        (base: None, or a constant per node)
-    state_k  = state_{k-1} + output_k @ fold + shift    (an affine map: de-normalise, fold)
+    state_k  = state_{k-1} + output_k @ fold + shift + drift
+                                    (an affine map: de-normalise, fold; drift: None or per node)
 
 ``grip``: state = (normalised) velocity, output = the change of velocity (residual on the
 input velocity), fold = identity.
@@ -14,6 +15,8 @@ input velocity), fold = identity.
 shift de-normalise it.
 ``vct``: state = position features (6 sin/cos channels), output = the normalised 8 channel
 delta (real + shift); fold de-normalises and adds the two shift channels onto the z channels.
+In the exact frame (:mod:`gripdem.models.decoder_modes`) the position state advances by the
+constant-velocity step (drift) plus the predicted deviation.
 The output head starts at zero, so an untrained decoder reproduces its base: the last
 velocity for ``grip`` (constant velocity along a chord in feature space), and for ``pct`` /
 ``vct`` a zero delta (stay) or the last observed delta (constant velocity) by config.
@@ -25,14 +28,23 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+CONTEXTS = ("sequence", "vector")
+
 
 class Seq2SeqGRU(nn.Module):
     """One encoder-decoder GRU network.
 
-    forward(features, state, base, horizon, fold, shift):
+    ``context="sequence"``: a GRU encodes the features over time (the graph-conv encoder's
+    ``(nodes, K, C)``). ``context="vector"``: the features are one vector per node (the
+    interaction encoder's ``(nodes, 1, C)``) and a linear map with tanh gives the decoder's
+    initial hidden state of every layer (a GRU over one step from a zero state would leave its
+    hidden-to-hidden weights unused).
+
+    forward(features, state, base, horizon, fold, shift, drift=None):
       features ``(nodes, time, channels)``, state ``(nodes, state_channels)``,
       base ``(nodes, out_channels)`` or None, fold ``(out_channels, state_channels)``,
-      shift ``(state_channels,)`` -> outputs ``(nodes, horizon, out_channels)``.
+      shift ``(state_channels,)``, drift ``(nodes, state_channels)`` or None
+      -> outputs ``(nodes, horizon, out_channels)``.
     """
 
     def __init__(
@@ -43,9 +55,17 @@ class Seq2SeqGRU(nn.Module):
         hidden: int = 350,
         layers: int = 2,
         dropout: float = 0.0,
+        context: str = "sequence",
     ):
         super().__init__()
-        self.encoder = nn.GRU(in_channels, hidden, layers, batch_first=True, dropout=dropout)
+        if context not in CONTEXTS:
+            raise ValueError(f"context must be one of {CONTEXTS}, got {context!r}")
+        self.layers, self.hidden = layers, hidden
+        if context == "sequence":
+            self.encoder = nn.GRU(in_channels, hidden, layers, batch_first=True, dropout=dropout)
+        else:
+            self.encoder = nn.Linear(in_channels, layers * hidden)
+        self.context = context
         self.decoder = nn.GRU(state_channels, hidden, layers, batch_first=True, dropout=dropout)
         self.head = nn.Linear(hidden, out_channels)
         nn.init.zeros_(self.head.weight)
@@ -59,8 +79,15 @@ class Seq2SeqGRU(nn.Module):
         horizon: int,
         fold: torch.Tensor,
         shift: torch.Tensor,
+        drift: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        _, hidden = self.encoder(features)
+        if self.context == "sequence":
+            _, hidden = self.encoder(features)
+        else:
+            init = torch.tanh(self.encoder(features[:, -1]))
+            hidden = init.reshape(-1, self.layers, self.hidden).transpose(0, 1).contiguous()
+        if drift is not None:
+            shift = shift + drift
         outputs = []
         for _ in range(horizon):
             step, hidden = self.decoder(state.unsqueeze(1), hidden)
@@ -76,7 +103,8 @@ class TrajectoryDecoder(nn.Module):
     """``n_heads`` seq2seq networks, outputs averaged (SPEC §5).
 
     forward(features ``(batch, particles, time, channels)``, state ``(batch, particles, S)``,
-    base ``(batch, particles, O)`` or None, horizon) -> ``(batch, particles, horizon, O)``.
+    base ``(batch, particles, O)`` or None, horizon, drift ``(batch, particles, S)`` or None)
+    -> ``(batch, particles, horizon, O)``.
     """
 
     def __init__(
@@ -90,6 +118,7 @@ class TrajectoryDecoder(nn.Module):
         dropout: float = 0.0,
         fold: torch.Tensor | None = None,
         shift: torch.Tensor | None = None,
+        context: str = "sequence",
     ):
         super().__init__()
         if fold is None:
@@ -107,7 +136,7 @@ class TrajectoryDecoder(nn.Module):
         self.register_buffer("fold", fold.float())
         self.register_buffer("shift", shift.float())
         self.heads = nn.ModuleList(
-            Seq2SeqGRU(in_channels, state_channels, out_channels, hidden, layers, dropout)
+            Seq2SeqGRU(in_channels, state_channels, out_channels, hidden, layers, dropout, context)
             for _ in range(n_heads)
         )
 
@@ -117,11 +146,16 @@ class TrajectoryDecoder(nn.Module):
         state: torch.Tensor,
         base: torch.Tensor | None,
         horizon: int,
+        drift: torch.Tensor | None = None,
     ) -> torch.Tensor:
         b, n, t, c = features.shape
         flat = features.reshape(b * n, t, c)
         flat_state = state.reshape(b * n, -1)
         flat_base = None if base is None else base.reshape(b * n, -1)
+        flat_drift = None if drift is None else drift.reshape(b * n, -1).to(features.dtype)
         fold, shift = self.fold.to(features.dtype), self.shift.to(features.dtype)
-        outputs = [head(flat, flat_state, flat_base, horizon, fold, shift) for head in self.heads]
+        outputs = [
+            head(flat, flat_state, flat_base, horizon, fold, shift, flat_drift)
+            for head in self.heads
+        ]
         return torch.stack(outputs, 0).mean(0).reshape(b, n, horizon, -1)

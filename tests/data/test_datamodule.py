@@ -62,7 +62,7 @@ def test_batch_matches_the_file(le_path, encoding):
         np.testing.assert_array_equal(batch.offsets[s], offs)
         np.testing.assert_array_equal(batch.input_positions[s], pos[:, : k + 1])
         np.testing.assert_array_equal(batch.target_positions[s], pos[:, k + 1 :])
-        expected = dm.normalizer.normalize(enc.encode(pos, offs)).astype(np.float32)
+        expected = dm.normalizer.normalize(enc.encode(pos, offs, anchor=k)).astype(np.float32)
         np.testing.assert_allclose(batch.inputs[s], expected[:, :k], rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(batch.target_deltas[s], expected[:, k:], rtol=1e-6, atol=1e-6)
         np.testing.assert_array_equal(

@@ -42,9 +42,9 @@ def test_encode_decode_round_trip(name, backend, lees_edwards, le_data, trajecto
     )
     enc = make_encoding(name, data.boundary)
     pos, offs = _window(data)
-    deltas = enc.encode(pos, offs)
-    assert deltas.shape == (32, 59, enc.n_channels) == (32, 59, len(enc.channel_names))
-    for k in (0, 7, 30):  # decode every horizon from several last observed frames
+    for k in (0, 7, 30):  # decode every horizon from several last observed frames (anchors)
+        deltas = enc.encode(pos, offs, anchor=k)
+        assert deltas.shape == (32, 59, enc.n_channels) == (32, 59, len(enc.channel_names))
         last, future, fut_offs = pos[:, k], deltas[:, k:], offs[k + 1 :]
         if backend == "torch":
             last, future = torch.from_numpy(last), torch.from_numpy(future)

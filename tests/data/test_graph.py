@@ -97,3 +97,24 @@ def test_normalisation_matches_the_reference_formula():
         np.linalg.norm(graph.edge_vector, axis=1), graph.edge_distance, rtol=1e-6
     )
     assert graph.edge_index.dtype == np.int64 and graph.edge_weight.dtype == np.float32
+
+
+@pytest.mark.parametrize("gap", [-2.7e-5, -3.1e-6, 4.3e-6, 0.013])
+def test_edge_gap_is_computed_in_float64(gap):
+    """Contact overlaps of ~1e-5 d: the float32 distance minus 1 would be off by up to 6e-8
+    (0.6 % of a 1e-5 overlap); the gap is taken in float64 before the cast. The pair sits
+    across the LE x face of a shifted cell, metres as units (d = 2.5e-6 m)."""
+    d = 2.5e-6
+    box = Box(12.8 * d, 12.8 * d, 12.8 * d)
+    offset = 0.3719 * box.lz
+    a = np.array([0.5 * box.lx - 0.3 * d, 0.1 * d, 0.49 * box.lz])
+    direction = np.array([0.6, 0.0, 0.8])
+    b = a + (1.0 + gap) * d * direction
+    b[0] -= box.lx  # wrap through +x: z shifted by the offset, then wrapped
+    b[2] = (b[2] - offset + box.lz / 2) % box.lz - box.lz / 2
+    graph = build_graph(np.stack([a, b]), box, offset, 1.5 * d, length_unit=d)
+    pair = graph.edge_index[0] != graph.edge_index[1]
+    assert pair.sum() == 2
+    np.testing.assert_allclose(graph.edge_gap[pair], gap, rtol=1e-5)
+    np.testing.assert_allclose(graph.edge_distance[pair], 1 + gap, rtol=1e-7)
+    assert (graph.edge_gap[~pair] == -1).all()

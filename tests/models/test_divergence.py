@@ -20,7 +20,9 @@ class PoisonInSecondEpoch(Callback):
 
 
 def test_nan_loss_stops_training_and_keeps_the_last_good_checkpoint(tmp_path, tiny_pbc_path):
-    dm = TrajectoryDataModule(tiny_pbc_path, split="6-3", history_len=3, graph_cutoff=1.5)
+    dm = TrajectoryDataModule(
+        tiny_pbc_path, split="6-3", history_len=3, graph_cutoff=1.5, encoding="sincos"
+    )
     dm.setup("fit")
     meta = dm.meta
     scene = {

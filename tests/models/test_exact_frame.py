@@ -1,0 +1,183 @@
+"""The exact frame's invariant (SPEC §11): with every learned output zero a model IS constant
+velocity, to float64 round-off, in both scenes, at every split, for every decoder mode and both
+encoders, on windows where many particles cross the LE faces in the history and the horizon.
+The paper's wrapped-space decoding is not exact for crossers (shown beside it)."""
+
+import numpy as np
+import pytest
+import torch
+
+from gripdem.boundary import minimum_image
+from gripdem.data.datamodule import TrajectoryDataModule
+from gripdem.data.features import step_lattice_shifts
+from gripdem.data.schema import write_dataset
+from gripdem.models.baselines import constant_velocity
+from gripdem.models.module import TrajectoryModule
+
+SPLITS = [("6-4", 4), ("20-12", 3), ("3-1", 3)]  # (split h-f, history_len)
+EXACT_MODES = [
+    ("grip", "graph_conv"),
+    ("pct", "graph_conv"),
+    ("vct", "graph_conv"),
+    ("grip", "interaction"),
+    ("pct", "interaction"),
+    ("vct", "interaction"),
+]
+
+
+def module(dm: TrajectoryDataModule, mode: str, encoder: str, encoding: str = "unwrapped"):
+    meta = dm.meta
+    scene = {
+        k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in meta.boundary.to_attrs().items()
+    }
+    scene.update(diameter=meta.diameter, frame_interval=meta.frame_interval)
+    options = {
+        "graph_conv": {"name": "graph_conv", "channels": 8, "n_blocks": 1},
+        "interaction": {"name": "interaction", "channels": 8, "rounds": 2},
+    }
+    torch.manual_seed(0)
+    model = TrajectoryModule(
+        scene=scene,
+        normalizer=dm.normalizer.to_dict(),
+        encoding=encoding,
+        horizon=dm.split.horizon,
+        history_len=dm.plan.history_len,
+        decoder_mode=mode,
+        encoder=options[encoder],
+        hidden=8,
+        n_particles=meta.n_particles,
+        graph_cutoff=dm.graph_cutoff,
+    )
+    return model.eval()
+
+
+@pytest.fixture(scope="module")
+def crossing_paths(tmp_path_factory, trajectories):
+    """Random walks under strong affine shear (LE, offsets sweeping the box) and in a periodic
+    box: every face is crossed many times."""
+    root = tmp_path_factory.mktemp("exact")
+    le = trajectories(n_sims=3, n_frames=40, n_particles=24, lees_edwards=True, seed=11)
+    pbc = trajectories(n_sims=3, n_frames=40, n_particles=24, lees_edwards=False, seed=12)
+    return {
+        "lebc": write_dataset(root / "le.h5", le),
+        "pbc": write_dataset(root / "pbc.h5", pbc),
+    }
+
+
+def _datamodule(path, split, history_len, encoding="unwrapped", cutoff=3.0):
+    dm = TrajectoryDataModule(
+        path,
+        split=split,
+        history_len=history_len,
+        encoding=encoding,
+        protocol="sims",
+        batch_size=4,
+        graph_cutoff=cutoff,
+        eval_stride=1,
+    )
+    dm.setup("fit")
+    return dm
+
+
+def _max_difference(pred, reference, box, offsets) -> float:
+    """Largest LE minimum-image difference of two (W, f, N, 3) predictions, in box lengths."""
+    diff = minimum_image(pred - reference, box, offsets[..., None])
+    return float(diff.abs().max()) / min(box.lx, box.ly, box.lz)
+
+
+def _crossings(batch, box) -> tuple[int, int]:
+    """x-face crossings in the history and in the horizon of a batch."""
+    pos = torch.cat([batch.input_positions, batch.target_positions], dim=2)
+    shift, _ = step_lattice_shifts(pos, box, batch.offsets)
+    crossed = shift[..., 0] != 0
+    k = batch.history_len
+    return int(crossed[..., :k].sum()), int(crossed[..., k:].sum())
+
+
+@pytest.mark.parametrize("scene", ["lebc", "pbc"])
+@pytest.mark.parametrize(("split", "history_len"), SPLITS)
+@pytest.mark.parametrize(("mode", "encoder"), EXACT_MODES)
+def test_untrained_model_is_constant_velocity(
+    crossing_paths, scene, split, history_len, mode, encoder
+):
+    dm = _datamodule(crossing_paths[scene], split, history_len)
+    model = module(dm, mode, encoder)
+    box = dm.meta.box
+    history_crossings = horizon_crossings = 0
+    for batch in dm.test_dataloader():
+        with torch.no_grad():
+            pred = model.decode(model(batch), batch)
+        cv = constant_velocity(
+            batch.input_positions.transpose(1, 2),
+            batch.input_offsets,
+            batch.target_offsets,
+            box,
+        )
+        assert pred.dtype == torch.float64
+        assert _max_difference(pred, cv, box, batch.target_offsets) < 1e-13
+        h, f = _crossings(batch, box)
+        history_crossings, horizon_crossings = history_crossings + h, horizon_crossings + f
+    assert history_crossings >= 10 and horizon_crossings >= 10
+
+
+@pytest.mark.parametrize("scene", ["lebc", "pbc"])
+@pytest.mark.parametrize(("mode", "encoder"), EXACT_MODES)
+def test_untrained_model_is_constant_velocity_on_the_dem_scene(request, scene, mode, encoder):
+    """The same on the built-in DEM's tiny scenes (real contacts, real LE crossers)."""
+    path = request.getfixturevalue(f"tiny_{scene}_path")
+    dm = _datamodule(path, "50-10", 10, cutoff=1.5 if encoder == "interaction" else 3.0)
+    model = module(dm, mode, encoder)
+    for batch in dm.test_dataloader():
+        with torch.no_grad():
+            pred = model.decode(model(batch), batch)
+        cv = constant_velocity(
+            batch.input_positions.transpose(1, 2),
+            batch.input_offsets,
+            batch.target_offsets,
+            dm.meta.box,
+        )
+        assert _max_difference(pred, cv, dm.meta.box, batch.target_offsets) < 1e-13
+
+
+def test_paper_frame_is_not_exact_for_le_crossers(crossing_paths):
+    """The paper's grip (sin/cos chord) misses the LE shift and jump of crossers: the
+    difference to constant velocity is of the order of the box, not of round-off."""
+    dm = _datamodule(crossing_paths["lebc"], "6-4", 4, encoding="sincos")
+    model = module(dm, "grip", "graph_conv", encoding="sincos")
+    worst = 0.0
+    for batch in dm.test_dataloader():
+        with torch.no_grad():
+            pred = model.decode(model(batch), batch)
+        cv = constant_velocity(
+            batch.input_positions.transpose(1, 2),
+            batch.input_offsets,
+            batch.target_offsets,
+            dm.meta.box,
+        )
+        worst = max(worst, _max_difference(pred, cv, dm.meta.box, batch.target_offsets))
+    assert worst > 1e-2
+
+
+def test_true_deviation_decodes_to_the_truth(crossing_paths):
+    """Decoding the true deviation from CV returns the stored target frames (crossings in the
+    horizon included): the exact frame loses nothing (float64), and the float32 training
+    targets only their rounding."""
+    dm = _datamodule(crossing_paths["lebc"], "6-4", 4)
+    model = module(dm, "grip", "graph_conv")
+    for batch in dm.test_dataloader():
+        truth = batch.target_positions.transpose(1, 2)
+        exact = model.decode(model.true_deviation(batch, torch.float64), batch)
+        assert _max_difference(exact, truth, dm.meta.box, batch.target_offsets) < 1e-13
+        rounded = model.decode(model.true_deviation(batch).double(), batch)
+        assert _max_difference(rounded, truth, dm.meta.box, batch.target_offsets) < 1e-6
+
+
+def test_exact_loss_is_one_at_the_start(crossing_paths):
+    """The exact losses are relative to constant velocity's: an untrained model scores 1."""
+    dm = _datamodule(crossing_paths["pbc"], "6-4", 4)
+    for mode in ("grip", "pct", "vct"):
+        model = module(dm, mode, "graph_conv")
+        batch = next(iter(dm.train_dataloader()))
+        with torch.no_grad():
+            loss = model._loss(model(batch), batch)
+        np.testing.assert_allclose(float(loss), 1.0, rtol=1e-6)

@@ -255,6 +255,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     best_score = trainer.checkpoint_callback.best_model_score
     metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
     metrics["train_seconds"] = train_seconds
+    trained = trainer.lightning_module
     metrics["epochs"] = trainer.current_epoch
     metrics["steps"] = trainer.global_step
     hp_values = {
@@ -271,6 +272,9 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     )
     report = {
         **metrics,
+        # time to accuracy: (training seconds, optimiser step, validation RMSE / CV's) at each
+        # validation of the fit
+        "accuracy_curve": [list(point) for point in trained.accuracy_curve],
         "in_sample": bool(dm.in_sample),
         "best_checkpoint": best,
         "hparams": hp,

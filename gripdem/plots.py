@@ -50,6 +50,7 @@ PARITY_MAX_POINTS = 20000
 BASELINE_LABELS = {
     "stay": "stay",
     "constant_velocity": "constant velocity",
+    "linear_ar": "linear AR",
     "mean_flow": "mean-flow profile",
 }
 

@@ -8,8 +8,12 @@ has no overrides file), then the key metrics, chosen by glob patterns (:data:`DE
 per-step RMSEs left out). A job without ``metrics.json`` (failed or still running) keeps its row
 with status ``no metrics.json``.
 
-Writes ``summary.md`` and ``summary.csv`` into ``SWEEP_DIR`` (atomically, replacing an older
-summary) and prints the Markdown table.
+When jobs differ by ``seed``, a second table groups the jobs that differ only by seed and gives
+``mean ± std`` (sample standard deviation) of every metric over the seeds, with the number of
+seeds: claims comparing models need several seeds.
+
+Writes ``summary.md`` and ``summary.csv`` (and ``summary_seeds.csv`` for the grouped table) into
+``SWEEP_DIR`` (atomically, replacing an older summary) and prints the Markdown tables.
 """
 
 from __future__ import annotations
@@ -36,11 +40,15 @@ from gripdem.data.h5io import atomic_write_text
 DEFAULT_METRICS = (
     "test/rmse",
     "test/rmse_over_d",
+    "test/rmse_ratio_constant_velocity",
+    "test/rmse_ratio_linear_ar",
     "test/rmse_constant_velocity_over_d",
+    "test/rmse_linear_ar_over_d",
     "test/rmse_stay_over_d",
     "test/rmse_mean_flow_over_d",
     "test/rmse_crossers",
     "test/rmse_constant_velocity_crossers",
+    "test/rmse_linear_ar_crossers",
     "test/n_crossers",
     "val/rmse_best",
     "test/physics/overlap_fraction",
@@ -50,6 +58,27 @@ DEFAULT_METRICS = (
     "in_sample",
 )
 EXCLUDE = ("*rmse_step*",)
+
+
+@dataclass(frozen=True)
+class SeedStats:
+    """Mean and sample standard deviation of one metric over ``n`` seeds (std NaN for n=1)."""
+
+    mean: float
+    std: float
+    n: int
+
+    @classmethod
+    def of(cls, values: Sequence[float]) -> SeedStats | None:
+        values = [
+            float(v) for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)
+        ]
+        if not values:
+            return None
+        n = len(values)
+        mean = sum(values) / n
+        std = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else math.nan
+        return cls(mean, std, n)
 
 
 @dataclass
@@ -172,9 +201,57 @@ def table(
     return header, rows
 
 
+SEED_KEY = "seed"
+
+
+def seed_groups(
+    jobs: Sequence[Job], patterns: Sequence[str] = DEFAULT_METRICS
+) -> tuple[list[str], list[list[Any]]] | None:
+    """Header and rows of the jobs grouped by every varying parameter except ``seed``: the
+    group's parameters, ``seeds`` (how many finished), then :class:`SeedStats` per metric.
+    None when the jobs do not differ by seed."""
+    varying = varying_params(jobs)
+    if SEED_KEY not in varying:
+        return None
+    params = [k for k in varying if k != SEED_KEY]
+    metrics = [m for m in metric_columns(jobs, patterns) if m != "in_sample"]
+    groups: dict[tuple, list[Job]] = {}
+    for job in jobs:
+        groups.setdefault(tuple(repr(job.params.get(k)) for k in params), []).append(job)
+    header = [*params, "seeds", *metrics]
+    rows = []
+    for members in groups.values():
+        done = [j for j in members if j.metrics is not None]
+        stats = [SeedStats.of([j.metrics.get(m) for j in done]) for m in metrics]
+        first = members[0]
+        rows.append([*(first.params.get(k) for k in params), len(done), *stats])
+    return header, rows
+
+
+def seed_csv(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """The grouped table as CSV, a ``_mean`` and a ``_std`` column per metric."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    first_metric = header.index("seeds") + 1
+    out_header = list(header[:first_metric])
+    for name in header[first_metric:]:
+        out_header += [f"{name}_mean", f"{name}_std"]
+    writer.writerow(out_header)
+    for row in rows:
+        cells = [_cell(v, True) for v in row[:first_metric]]
+        for stat in row[first_metric:]:
+            cells += ["", ""] if stat is None else [repr(stat.mean), repr(stat.std)]
+        writer.writerow(cells)
+    return buf.getvalue()
+
+
 def _cell(value: Any, precise: bool) -> str:
     if value is None:
         return ""
+    if isinstance(value, SeedStats):
+        if math.isnan(value.std):
+            return f"{value.mean:.4g}"
+        return f"{value.mean:.4g} ± {value.std:.2g}"
     if isinstance(value, bool):
         return str(value).lower()
     if isinstance(value, float):
@@ -217,6 +294,10 @@ def write_summary(
     header, rows = table(jobs, patterns)
     out = Path(sweep_dir if out_dir is None else out_dir)
     markdown = to_markdown(header, rows)
+    grouped = seed_groups(jobs, patterns)
+    if grouped is not None:
+        markdown += "\n## Mean ± std over seeds\n\n" + to_markdown(*grouped)
+        atomic_write_text(out / "summary_seeds.csv", seed_csv(*grouped), overwrite=True)
     md = atomic_write_text(out / "summary.md", markdown, overwrite=True)
     csv_path = atomic_write_text(out / "summary.csv", to_csv(header, rows), overwrite=True)
     return md, csv_path, markdown

@@ -133,3 +133,28 @@ def test_cli(sweep, tmp_path, capsys):
         check=True,
     )
     assert "summary.csv" in done.stdout
+
+
+def test_jobs_that_differ_only_by_seed_are_grouped_with_mean_and_std(tmp_path):
+    root = tmp_path / "seeds"
+    root.mkdir()
+    values = {("grip", 0): 1.0, ("grip", 1): 2.0, ("grip", 2): 4.0, ("pct", 0): 3.0}
+    for number, ((model, seed), rmse) in enumerate(values.items()):
+        make_job(root, number, [f"model={model}", f"seed={seed}"], metrics_of(rmse, 5.0, 1.0))
+    make_job(root, 9, ["model=pct", "seed=1"], None)  # a failed seed is counted as missing
+    md, _, markdown = write_summary(root)
+    assert "## Mean ± std over seeds" in markdown
+    grip = next(line for line in markdown.splitlines() if line.startswith("| grip | 3 |"))
+    # mean 7/3, sample std of (1, 2, 4) = 1.528
+    assert "2.333 ± 1.5" in grip
+    assert any(line.startswith("| pct | 1 | 3 |") for line in markdown.splitlines())
+    rows = list(csv.DictReader(io.StringIO((root / "summary_seeds.csv").read_text())))
+    assert [r["model"] for r in rows] == ["grip", "pct"]
+    assert float(rows[0]["test/rmse_mean"]) == pytest.approx(7 / 3)
+    assert float(rows[0]["test/rmse_std"]) == pytest.approx(1.5275252, rel=1e-6)
+    assert rows[1]["test/rmse_std"] == "nan" and rows[0]["seeds"] == "3"
+
+
+def test_no_seed_table_without_seeds(sweep):
+    _, _, markdown = write_summary(sweep)
+    assert "over seeds" not in markdown and not (sweep / "summary_seeds.csv").exists()

@@ -66,7 +66,28 @@ def gap_features(gap: torch.Tensor) -> torch.Tensor:
 
 
 def mlp(n_in: int, hidden: int, n_out: int) -> nn.Sequential:
+    """Two layers with SiLU. (A LayerNorm on the outputs, as learned simulators use, measured
+    worse here: 0.84 vs 0.80 of CV's RMSE at 190-10 pbc; it removes the message magnitude.)"""
     return nn.Sequential(nn.Linear(n_in, hidden), nn.SiLU(), nn.Linear(hidden, n_out))
+
+
+class PairMLP(nn.Module):
+    """``MLP([h_i, h_j, x_ij])`` for every edge without building the ``(E, 3C)``
+    concatenation: the first layer is split into ``A h`` and ``B h`` computed once per node
+    (gathered per edge) plus ``W x_ij`` per edge; the same function, a third of the work."""
+
+    def __init__(self, channels: int, edge_channels: int, hidden: int, n_out: int):
+        super().__init__()
+        self.receiver = nn.Linear(channels, hidden)
+        self.sender = nn.Linear(channels, hidden, bias=False)
+        self.edge = nn.Linear(edge_channels, hidden, bias=False)
+        self.out = nn.Linear(hidden, n_out)
+
+    def forward(self, h: torch.Tensor, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
+        """h ``(nodes, C)``, x ``(E, C_e)``, edge_index ``(2, E)`` -> ``(E, n_out)``."""
+        i, j = edge_index
+        first = self.receiver(h)[i] + self.sender(h)[j] + self.edge(x)
+        return self.out(nn.functional.silu(first))
 
 
 class InteractionEncoder(nn.Module):
@@ -97,11 +118,10 @@ class InteractionEncoder(nn.Module):
         m = self.edge_history
         self.node_in = mlp(3 * self.history_len + self.static_features, channels, channels)
         self.edge_in = mlp(3 + 3 + 4 * m, channels, channels)
-        self.message = nn.ModuleList(mlp(3 * channels, channels, channels) for _ in range(rounds))
+        c = channels
+        self.message = nn.ModuleList(PairMLP(c, c, c, c) for _ in range(rounds))
         # the edges are updated between rounds (the last round's update would be unused)
-        self.edge_update = nn.ModuleList(
-            mlp(3 * channels, channels, channels) for _ in range(rounds - 1)
-        )
+        self.edge_update = nn.ModuleList(PairMLP(c, c, c, c) for _ in range(rounds - 1))
         self.node_update = nn.ModuleList(
             mlp(2 * channels, channels, channels) for _ in range(rounds)
         )
@@ -149,13 +169,13 @@ class InteractionEncoder(nn.Module):
             node = torch.cat([node, static.reshape(b * n, -1).to(node.dtype)], dim=-1)
         h = self.node_in(node)
         e = self.edge_in(self.edge_inputs(flat, graph))
-        i, j = graph.edge_index
+        index = graph.edge_index
         for r, (message, node_update) in enumerate(
             zip(self.message, self.node_update, strict=True)
         ):
-            msg = message(torch.cat([h[i], h[j], e], dim=-1))
+            msg = message(h, e, index)
             if r < len(self.edge_update):
-                e = e + self.edge_update[r](torch.cat([h[i], h[j], msg], dim=-1))
-            incoming = torch.zeros_like(h).index_add_(0, i, msg)
+                e = e + self.edge_update[r](h, msg, index)
+            incoming = torch.zeros_like(h).index_add_(0, index[0], msg)
             h = h + node_update(torch.cat([h, incoming], dim=-1))
         return h.reshape(b, n, 1, -1)

@@ -197,10 +197,11 @@ def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict
 def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) -> str:
     """Model vs baselines on the test windows, as a Markdown table."""
     label = "test (IN-SAMPLE: trained on these windows)" if in_sample else "test (out of sample)"
-    rows = [f"| {label} | RMSE (m) | RMSE / d |", "|---|---|---|"]
+    rows = [f"| {label} | RMSE (m) | RMSE / d | model / this |", "|---|---|---|---|"]
+    model = metrics.get("test/rmse", math.nan)
     for name, key in [("model", "test/rmse")] + [(b, f"test/rmse_{b}") for b in BASELINES]:
         value = metrics.get(key, math.nan)
-        rows.append(f"| {name} | {value:.4g} | {value / diameter:.4g} |")
+        rows.append(f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} |")
     return "\n".join(rows)
 
 

@@ -79,7 +79,7 @@ def test_custom_split_and_defaults():
     )
     assert default.data.history_len == 10  # experiment=fast is the default preset
     # the data's graph cut-off follows the encoder (one source of truth)
-    assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.5
+    assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.3
     assert compose_run(["model=grip_paper"]).data.graph_cutoff == 3.0
     assert compose_run(["model=vct"]).data.encoding.value == "unwrapped"
 

@@ -146,6 +146,7 @@ class TrajectoryModule(L.LightningModule):
         self.profile = profile or ("linear" if self.boundary.is_lees_edwards else "cosine")
         self.linear_ar = None if linear_ar is None else LinearAR.from_dict(linear_ar)
         self.baselines = tuple(b for b in BASELINES if b != "linear_ar" or self.linear_ar)
+        self.position_features = False  # x-position node features (interaction encoder)
         self.encoder_name, self.encoder = self._build_encoder(dict(encoder or {}), n_particles)
         lay = modes.layout(decoder_mode, self.encoding, self.normalizer)
         self.decoder = TrajectoryDecoder(

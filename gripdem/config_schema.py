@@ -118,6 +118,7 @@ class ModelSchema:
     lr_schedule: LrSchedule = LrSchedule.constant
     warmup_fraction: float = 0.05
     input_noise: float = 0.0
+    ar_prior: bool = False
 
 
 @dataclass

@@ -111,6 +111,7 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         lr_schedule=model_cfg["lr_schedule"],
         warmup_fraction=model_cfg["warmup_fraction"],
         input_noise=model_cfg["input_noise"],
+        ar_prior=model_cfg["ar_prior"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),
@@ -143,6 +144,7 @@ def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
         "lr": float(model["lr"]),
         "lr_schedule": model["lr_schedule"],
         "input_noise": float(model["input_noise"]),
+        "ar_prior": bool(model["ar_prior"]),
         "graph_cutoff_d": float(cfg.data.graph_cutoff),
         "seed": int(cfg.seed),
     }

@@ -127,6 +127,41 @@ class LinearAR:
             int(count),
         )
 
+    def rollout_steps(
+        self,
+        observed: torch.Tensor,
+        observed_offsets: torch.Tensor | None,
+        horizon: int,
+        boundary: Boundary,
+    ) -> torch.Tensor:
+        """The filter's steps over the horizon, lattice-continuous in the image cell of the
+        last observed frame (the exact frame of :mod:`gripdem.models.decoder_modes`).
+
+        observed ``(windows, K+1, particles, 3)`` wrapped (K >= lags), observed_offsets
+        ``(windows, K+1)`` float64 (ignored in a periodic box) -> ``(windows, particles,
+        horizon, 3)`` float64; the first step goes from the last observed frame."""
+        observed = torch.as_tensor(observed).double().transpose(1, 2)  # (W, N, K+1, 3)
+        if observed.shape[2] - 1 < self.lags:
+            raise ValueError(
+                f"linear AR baseline fitted with {self.lags} lags needs at least that many "
+                f"observed steps, got {observed.shape[2] - 1}"
+            )
+        obs_off = None
+        if boundary.is_lees_edwards:
+            obs_off = torch.as_tensor(observed_offsets, dtype=torch.float64)[:, None, :]
+        rel, _ = _flow_relative_steps(observed, boundary.box, obs_off, self.strain)
+        weights = torch.tensor(self.weights, dtype=torch.float64, device=observed.device)
+        history = [rel[..., -k, :] for k in range(1, self.lags + 1)]  # lag 1 first
+        x = observed[..., -1, 0]
+        steps = []
+        for _ in range(horizon):
+            step_rel = _features(history, x, self.lx) @ weights
+            step = add_affine_flow(step_rel[..., None, :], x[..., None], self.strain)[..., 0, :]
+            x = x + step[..., 0]
+            steps.append(step)
+            history = [step_rel] + history[:-1]
+        return torch.stack(steps, dim=-2)
+
     def predict(
         self,
         observed: torch.Tensor,
@@ -139,29 +174,15 @@ class LinearAR:
         observed ``(windows, K+1, particles, 3)`` wrapped (K >= lags), observed_offsets
         ``(windows, K+1)`` and target_offsets ``(windows, f)`` float64 -> predicted wrapped
         positions ``(windows, f, particles, 3)`` float64."""
-        observed = torch.as_tensor(observed).double().transpose(1, 2)  # (W, N, K+1, 3)
-        if observed.shape[2] - 1 < self.lags:
-            raise ValueError(
-                f"linear AR baseline fitted with {self.lags} lags needs at least that many "
-                f"observed steps, got {observed.shape[2] - 1}"
-            )
-        le = boundary.is_lees_edwards
-        obs_off = torch.as_tensor(observed_offsets, dtype=torch.float64)[:, None, :] if le else None
+        observed = torch.as_tensor(observed).double()
         tgt_off = torch.as_tensor(target_offsets, dtype=torch.float64)
-        rel, _ = _flow_relative_steps(observed, boundary.box, obs_off, self.strain)
-        weights = torch.tensor(self.weights, dtype=torch.float64, device=observed.device)
-        history = [rel[..., -k, :] for k in range(1, self.lags + 1)]  # lag 1 first
-        position = observed[..., -1, :]
-        frames = []
-        for _ in range(tgt_off.shape[1]):
-            x = position[..., 0]
-            step_rel = _features(history, x, self.lx) @ weights
-            step = add_affine_flow(step_rel[..., None, :], x[..., None], self.strain)[..., 0, :]
-            position = position + step
-            frames.append(position)
-            history = [step_rel] + history[:-1]
-        continuous = torch.stack(frames, dim=1)  # (W, f, N, 3)
-        return wrap_positions(continuous, boundary.box, tgt_off[..., None] if le else None)
+        steps = self.rollout_steps(observed, observed_offsets, tgt_off.shape[1], boundary)
+        continuous = observed[:, -1, :, None] + torch.cumsum(steps, dim=2)  # (W, N, f, 3)
+        le = boundary.is_lees_edwards
+        wrapped = wrap_positions(
+            continuous.transpose(1, 2), boundary.box, tgt_off[..., None] if le else None
+        )
+        return wrapped
 
     def to_dict(self) -> dict[str, Any]:
         return {

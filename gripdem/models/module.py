@@ -92,6 +92,8 @@ class TrajectoryModule(L.LightningModule):
             ``cosine`` (linear warm-up over ``warmup_fraction`` of the steps, then cosine to 0).
         input_noise: training-time Gaussian noise on the encoder's input steps, in units of
             the per-step velocity change (0: off).
+        ar_prior: exact frame: add the linear AR forecast's deviation from CV to the output
+            through a learned gate ``(horizon, 3)`` that starts at zero (needs ``linear_ar``).
         n_particles: needed only by ``trainable_graph=dense``.
         graph_cutoff: the graph's cut-off in diameters (scales the edge features).
         profile: mean-flow baseline profile (``cosine`` | ``linear``; default by boundary).
@@ -118,6 +120,7 @@ class TrajectoryModule(L.LightningModule):
         lr_schedule: str = "constant",
         warmup_fraction: float = 0.05,
         input_noise: float = 0.0,
+        ar_prior: bool = False,
         n_particles: int | None = None,
         graph_cutoff: float = 3.0,
         profile: str | None = None,
@@ -146,6 +149,15 @@ class TrajectoryModule(L.LightningModule):
         self.profile = profile or ("linear" if self.boundary.is_lees_edwards else "cosine")
         self.linear_ar = None if linear_ar is None else LinearAR.from_dict(linear_ar)
         self.baselines = tuple(b for b in BASELINES if b != "linear_ar" or self.linear_ar)
+        self.ar_gate = None
+        if ar_prior:
+            if not self.exact or self.linear_ar is None:
+                raise ValueError(
+                    "model.ar_prior=true needs the exact frame (model.encoding=unwrapped) and the "
+                    "fitted linear AR baseline"
+                )
+            # zero: an untrained model is CV; one gate per horizon step and axis
+            self.ar_gate = torch.nn.Parameter(torch.zeros(horizon, 3))
         self.position_features = False  # x-position node features (interaction encoder)
         self.encoder_name, self.encoder = self._build_encoder(dict(encoder or {}), n_particles)
         lay = modes.layout(decoder_mode, self.encoding, self.normalizer)
@@ -241,7 +253,22 @@ class TrajectoryModule(L.LightningModule):
         if self.exact and mode != "grip":
             drift = modes.state_drift(mode, self.encoding, modes.last_step(batch, self.boundary))
         outputs = self.decoder(features, state, base, self.hparams.horizon, drift)
-        return modes.outputs_to_deltas(mode, self.exact, outputs, batch.inputs)
+        deviation = modes.outputs_to_deltas(mode, self.exact, outputs, batch.inputs)
+        if self.ar_gate is not None:
+            deviation = deviation + self.ar_gate * self.ar_deviation(batch)
+        return deviation
+
+    def ar_deviation(self, batch) -> torch.Tensor:
+        """The linear AR forecast's per-step deviation from CV in units of the velocity change
+        ``(B, N, f, 3)`` float32 (computed in float64; the exact frame's prior)."""
+        steps = self.linear_ar.rollout_steps(
+            batch.input_positions.double().transpose(1, 2),
+            batch.input_offsets.double(),
+            self.hparams.horizon,
+            self.boundary,
+        )
+        v0 = modes.last_step(batch, self.boundary)[:, :, None]
+        return ((steps - v0) / self.change_std).float()
 
     def graph(self, batch) -> EdgeGraph:
         """The batch's fixed graph with edge features ``(E, 4)``: minimum-image vector and

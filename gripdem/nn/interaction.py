@@ -86,7 +86,11 @@ class PairMLP(nn.Module):
     def forward(self, h: torch.Tensor, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
         """h ``(nodes, C)``, x ``(E, C_e)``, edge_index ``(2, E)`` -> ``(E, n_out)``."""
         i, j = edge_index
-        first = self.receiver(h)[i] + self.sender(h)[j] + self.edge(x)
+        # index_select, not h[i]: its backward is an index_add, advanced indexing's is a
+        # much slower accumulating index_put on the CPU
+        first = (
+            self.receiver(h).index_select(0, i) + self.sender(h).index_select(0, j) + self.edge(x)
+        )
         return self.out(nn.functional.silu(first))
 
 
@@ -140,7 +144,7 @@ class InteractionEncoder(nn.Module):
         vector = graph.vector.to(history.dtype)
         distance = vector.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         recent = history[:, -self.edge_history :]  # (nodes, M, 3)
-        relative = recent[j] - recent[i]  # (E, M, 3)
+        relative = recent.index_select(0, j) - recent.index_select(0, i)  # (E, M, 3)
         normal = torch.einsum("emc,ec->em", relative, vector / distance)
         return torch.cat(
             [

@@ -25,13 +25,15 @@ EXACT_MODES = [
 ]
 
 
-def module(dm: TrajectoryDataModule, mode: str, encoder: str, encoding: str = "unwrapped"):
+def module(
+    dm: TrajectoryDataModule, mode: str, encoder: str, encoding: str = "unwrapped", **options
+):
     meta = dm.meta
     scene = {
         k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in meta.boundary.to_attrs().items()
     }
     scene.update(diameter=meta.diameter, frame_interval=meta.frame_interval)
-    options = {
+    encoders = {
         "graph_conv": {"name": "graph_conv", "channels": 8, "n_blocks": 1},
         "interaction": {"name": "interaction", "channels": 8, "rounds": 2},
     }
@@ -43,10 +45,11 @@ def module(dm: TrajectoryDataModule, mode: str, encoder: str, encoding: str = "u
         horizon=dm.split.horizon,
         history_len=dm.plan.history_len,
         decoder_mode=mode,
-        encoder=options[encoder],
+        encoder=encoders[encoder],
         hidden=8,
         n_particles=meta.n_particles,
         graph_cutoff=dm.graph_cutoff,
+        **options,
     )
     return model.eval()
 
@@ -181,3 +184,33 @@ def test_exact_loss_is_one_at_the_start(crossing_paths):
         with torch.no_grad():
             loss = model._loss(model(batch), batch)
         np.testing.assert_allclose(float(loss), 1.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize("scene", ["lebc", "pbc"])
+@pytest.mark.parametrize("mode", ["grip", "pct", "vct"])
+def test_ar_prior_starts_at_cv_and_its_open_gate_is_the_ar_baseline(crossing_paths, scene, mode):
+    """``ar_prior``: the gate starts at zero (the model is CV); with the gate open and the GRU
+    heads at zero the model is the linear AR baseline, crossers included (random walks under
+    strong shear: AR and CV differ by much more than the tolerance)."""
+    dm = _datamodule(crossing_paths[scene], "6-4", 4)
+    ar = dm.fit_linear_ar(2)
+    model = module(dm, mode, "interaction", ar_prior=True, linear_ar=ar.to_dict())
+    box = dm.meta.box
+    for batch in dm.test_dataloader():
+        with torch.no_grad():
+            closed = model.decode(model(batch), batch)
+            model.ar_gate.fill_(1.0)
+            opened = model.decode(model(batch), batch)
+            model.ar_gate.zero_()
+        baselines = model.predict_baselines(batch)
+        offsets = batch.target_offsets
+        assert _max_difference(closed, baselines["constant_velocity"], box, offsets) < 1e-13
+        # the prior enters the float32 output: AR up to float32 rounding of the deviation
+        assert _max_difference(opened, baselines["linear_ar"], box, offsets) < 1e-7
+        assert _max_difference(opened, closed, box, offsets) > 1e-4
+
+
+def test_ar_prior_needs_the_exact_frame_and_the_filter(crossing_paths):
+    dm = _datamodule(crossing_paths["pbc"], "6-4", 4)
+    with pytest.raises(ValueError, match="ar_prior"):
+        module(dm, "grip", "graph_conv", ar_prior=True)

@@ -88,6 +88,13 @@ def _max_difference(pred, reference, box, offsets) -> float:
     return float(diff.abs().max()) / min(box.lx, box.ly, box.lz)
 
 
+def _cv(batch, box):
+    """The constant-velocity baseline's wrapped positions ``(B, f, N, 3)`` on a batch."""
+    return constant_velocity(
+        batch.input_positions.transpose(1, 2), batch.input_offsets, batch.target_offsets, box
+    )
+
+
 def _crossings(batch, box) -> tuple[int, int]:
     """x-face crossings in the history and in the horizon of a batch."""
     pos = torch.cat([batch.input_positions, batch.target_positions], dim=2)
@@ -110,12 +117,7 @@ def test_untrained_model_is_constant_velocity(
     for batch in dm.test_dataloader():
         with torch.no_grad():
             pred = model.decode(model(batch), batch)
-        cv = constant_velocity(
-            batch.input_positions.transpose(1, 2),
-            batch.input_offsets,
-            batch.target_offsets,
-            box,
-        )
+        cv = _cv(batch, box)
         assert pred.dtype == torch.float64
         assert _max_difference(pred, cv, box, batch.target_offsets) < 1e-13
         h, f = _crossings(batch, box)
@@ -133,12 +135,7 @@ def test_untrained_model_is_constant_velocity_on_the_dem_scene(request, scene, m
     for batch in dm.test_dataloader():
         with torch.no_grad():
             pred = model.decode(model(batch), batch)
-        cv = constant_velocity(
-            batch.input_positions.transpose(1, 2),
-            batch.input_offsets,
-            batch.target_offsets,
-            dm.meta.box,
-        )
+        cv = _cv(batch, dm.meta.box)
         assert _max_difference(pred, cv, dm.meta.box, batch.target_offsets) < 1e-13
 
 
@@ -151,12 +148,7 @@ def test_paper_frame_is_not_exact_for_le_crossers(crossing_paths):
     for batch in dm.test_dataloader():
         with torch.no_grad():
             pred = model.decode(model(batch), batch)
-        cv = constant_velocity(
-            batch.input_positions.transpose(1, 2),
-            batch.input_offsets,
-            batch.target_offsets,
-            dm.meta.box,
-        )
+        cv = _cv(batch, dm.meta.box)
         worst = max(worst, _max_difference(pred, cv, dm.meta.box, batch.target_offsets))
     assert worst > 1e-2
 

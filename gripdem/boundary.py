@@ -270,6 +270,20 @@ def wrap_positions(
     return wrapped, _stack([velocities[..., 0], velocities[..., 1], vz], velocities)
 
 
+def wrap_into_sheared_cell(positions: Array, box: Box, offset: Array | float = 0.0) -> Array:
+    """Positions ``(..., 3)`` (any image) moved into the sheared LE cell
+    ``{-l/2 + v*(lx, 0, delta) + w*(0, ly, 0) + u*(0, 0, lz)}``, ``u, v, w`` in ``[0, 1)``: the
+    parallelepiped a triclinic engine (LAMMPS) stores its atoms in, instead of the orthorhombic
+    box gripdem wraps into. x and y are wrapped as usual; z lies in ``[-lz/2, lz/2) + v*delta``
+    where ``v = (x + lx/2)/lx``. Only whole lattice vectors are added (same LE image set).
+    offset broadcastable to ``positions.shape[:-1]``."""
+    wrapped = wrap_positions(positions, box, offset)
+    delta = _as_offset(offset, wrapped)
+    lift = (wrapped[..., 0] / box.lx + 0.5) * delta
+    z = lift + wrap_coordinate(wrapped[..., 2] - lift, box.lz)
+    return _stack([wrapped[..., 0], wrapped[..., 1], z], wrapped)
+
+
 def le_offset_increments(offsets: Array, box: Box) -> Array:
     """Unwrapped growth of the LE offset between consecutive frames, ``(..., T) -> (..., T-1)``:
     ``δ(t+1) - δ(t)`` folded into ``[-lz/2, lz/2)`` is the image cell's z advance per step

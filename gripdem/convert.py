@@ -4,8 +4,11 @@ Usage::
 
     python -m gripdem.convert fordatis ARCHIVE OUT.h5 [--shear-rate K] [--le-sign {+1,-1}]
         [--time-origin T] [--drop-frames N] [--diameter D] [--overwrite]
+    python -m gripdem.convert lammps DUMP [DUMP ...] OUT.h5 --diameter D --timestep DT
+        [--shear-rate K] [--axes yzx] [--le-sign {+1,-1}] [--time-origin T] [--split-files]
+        [--overwrite]
 
-One subcommand per source format (more importers can be added beside ``fordatis``). The
+One subcommand per source format. The
 output is written atomically by :func:`gripdem.data.schema.write_dataset` and an existing file
 is never replaced without ``--overwrite``. Bad input exits with status 1 and one clear message
 (file, field, expectation), no traceback.
@@ -18,6 +21,7 @@ import sys
 from pathlib import Path
 
 from gripdem.data.fordatis import DEFAULT_DIAMETER, ImportReport, read_fordatis
+from gripdem.data.lammps import read_lammps
 from gripdem.data.schema import write_dataset
 
 
@@ -94,6 +98,89 @@ def _fordatis(args: argparse.Namespace) -> int:
     return 0
 
 
+def _lammps(args: argparse.Namespace) -> int:
+    if len(args.files) < 2:
+        raise ValueError(
+            "give one or more dump files and then the output file: DUMP [DUMP ...] OUT.h5"
+        )
+    *dumps, output = (Path(p) for p in args.files)
+    if output.suffix not in (".h5", ".hdf5"):
+        raise ValueError(f"{output}: the last argument is the output file and must end in .h5")
+    if output.exists() and not args.overwrite:
+        raise FileExistsError(f"{output}: exists; refusing to overwrite it (pass --overwrite)")
+    data, report = read_lammps(
+        dumps,
+        diameter=args.diameter,
+        timestep=args.timestep,
+        shear_rate=args.shear_rate,
+        axes=args.axes,
+        le_sign=args.le_sign,
+        time_origin=args.time_origin,
+        split_files=args.split_files,
+    )
+    for line in report.lines():
+        print(line)
+    path = write_dataset(output, data, overwrite=args.overwrite)
+    print(
+        f"wrote {path}: positions {tuple(data.positions.shape)} (sims, frames, particles, 3)"
+        + (", velocities" if data.velocities is not None else "")
+        + f", {path.stat().st_size / 1e6:.3g} MB"
+    )
+    return 0
+
+
+def _add_lammps(sub) -> None:
+    lammps = sub.add_parser(
+        "lammps",
+        help="LAMMPS / LIGGGHTS text dumps (orthogonal or triclinic, gzip allowed)",
+        description="Import LAMMPS/LIGGGHTS text dumps: ITEM: ATOMS with id and x y z, xs ys zs, "
+        "xu yu zu (with or without ix iy iz) or xsu ysu zsu, columns and particles in any "
+        "order, one or many snapshots per file. A box sheared by a tilt factor becomes "
+        "Lees-Edwards data: ours (x, y, z) = LAMMPS (y, z, x) for an xy tilt, the tilt is "
+        "the LE offset, box flips are undone and the tilt is checked against --shear-rate "
+        "times the time. Lengths and times keep the dump's units.",
+    )
+    lammps.add_argument(
+        "files", nargs="+", metavar="DUMP ... OUT.h5", help="dump files, then the output file"
+    )
+    lammps.add_argument(
+        "--diameter", type=float, required=True, metavar="D", help="particle diameter"
+    )
+    lammps.add_argument(
+        "--timestep",
+        type=float,
+        required=True,
+        metavar="DT",
+        help="the engine's time step (frame times are TIMESTEP x DT)",
+    )
+    lammps.add_argument(
+        "--shear-rate",
+        type=float,
+        metavar="K",
+        help="shear rate, checked against the tilt (read from it when omitted); for an "
+        "orthogonal box it makes the data Lees-Edwards, sign and origin from the crossers",
+    )
+    lammps.add_argument(
+        "--axes",
+        metavar="ABC",
+        help="LAMMPS axes of our x, y, z (default: yzx for a box tilted in xy, zyx for xz, zxy "
+        "for yz, xyz for an orthogonal box)",
+    )
+    lammps.add_argument(
+        "--le-sign", type=_sign, metavar="{+1,-1}", help="LE convention (checked, or inferred)"
+    )
+    lammps.add_argument(
+        "--time-origin", type=float, metavar="T", help="time at which the LE offset is 0"
+    )
+    lammps.add_argument(
+        "--split-files",
+        action="store_true",
+        help="every dump file is its own simulation (default: all files are one simulation)",
+    )
+    lammps.add_argument("--overwrite", action="store_true", help="replace OUT.h5 if it exists")
+    lammps.set_defaults(run=_lammps)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m gripdem.convert",
@@ -148,6 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fordatis.add_argument("--overwrite", action="store_true", help="replace OUT.h5 if it exists")
     fordatis.set_defaults(run=_fordatis)
+    _add_lammps(sub)
     return parser
 
 

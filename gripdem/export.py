@@ -19,9 +19,10 @@ for particles whose truth crosses an x face during the horizon, ``error`` (predi
 only) the minimum-image distance to the truth at that frame. Lengths are in the data's units
 (metres by default); particles have species ``P``.
 
-LAMMPS text dumps (``ITEM: ATOMS id type x y z radius``) with an orthogonal box are written by
-:func:`write_lammps_dump` for tools that prefer them; the LE offset goes into nothing there
-(LAMMPS tilts its box along x, our flow axis is z), so use extended XYZ for LE data.
+LAMMPS text dumps (``ITEM: ATOMS id type x y z radius``) with an orthogonal box in gripdem's
+axes are written by :func:`write_lammps_dump` for tools that prefer them; the LE offset goes into
+nothing there. For LE data that LAMMPS (and ``gripdem.convert lammps``) should read as a sheared
+box, use ``python -m gripdem.handback --dump`` (LAMMPS's axes, the offset as the xy tilt).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import numpy as np
 
 from gripdem import metrics
 from gripdem.data.h5io import atomic_write_text
+from gripdem.data.lammps_dump import dump_text
 from gripdem.predictions import Predictions, read_predictions
 
 FLOAT = "%.12g"
@@ -141,18 +143,11 @@ def write_lammps_dump(
     positions = np.asarray(positions, dtype=np.float64)
     frames, n, _ = positions.shape
     steps = np.arange(frames) if timesteps is None else np.asarray(timesteps)
-    half = [0.5 * float(v) for v in np.asarray(box_lengths, dtype=np.float64)]
-    ids = np.arange(1, n + 1)
-    buf = io.StringIO()
-    for j in range(frames):
-        buf.write(f"ITEM: TIMESTEP\n{int(steps[j])}\nITEM: NUMBER OF ATOMS\n{n}\n")
-        buf.write("ITEM: BOX BOUNDS pp pp pp\n")
-        for h in half:
-            buf.write(f"{-h!r} {h!r}\n")
-        buf.write("ITEM: ATOMS id type x y z radius\n")
-        table = np.column_stack([ids, np.ones(n), positions[j], np.full(n, radius)])
-        np.savetxt(buf, table, fmt=f"%d %d {FLOAT} {FLOAT} {FLOAT} {FLOAT}")
-    return atomic_write_text(path, buf.getvalue(), overwrite)
+    lengths = np.asarray(box_lengths, dtype=np.float64)
+    text = dump_text(
+        steps, -0.5 * lengths, lengths, positions, None, {"radius": np.full(n, radius)}, None, FLOAT
+    )
+    return atomic_write_text(path, text, overwrite)
 
 
 def export_lammps(

@@ -1,0 +1,393 @@
+"""LAMMPS / LIGGGHTS text dumps: read snapshots as written, and write them.
+
+A dump is a sequence of snapshots, each a set of ``ITEM:`` blocks::
+
+    ITEM: TIMESTEP               one integer
+    ITEM: NUMBER OF ATOMS        one integer N
+    ITEM: BOX BOUNDS [xy xz yz] [pp pp pp]
+    xlo_bound xhi_bound [xy]     three lines, a tilt factor on each for a triclinic box
+    ylo_bound yhi_bound [xz]
+    zlo_bound zhi_bound [yz]
+    ITEM: ATOMS id type x y z ...   N lines, columns in any order
+
+Other items (``ITEM: TIME``, ``ITEM: UNITS`` of ``dump_modify time/units yes``) are kept as
+text or skipped. Files may hold one or many snapshots and may be gzip-compressed (by suffix or
+content). This module knows the text format only: which columns hold what and how the box is
+turned into lattice vectors; :mod:`gripdem.data.lammps` maps a dump onto gripdem's conventions.
+
+Box of a snapshot (LAMMPS axes): origin ``lo (3,)``, lattice vectors as the rows of
+``cell (3, 3)`` = ``a = (Lx, 0, 0)``, ``b = (xy, Ly, 0)``, ``c = (xz, yz, Lz)``; for a triclinic
+box the dump writes the bounding box (``xlo_bound = xlo + min(0, xy, xz, xy + xz)``, ...).
+
+Every error is a :class:`DumpError` naming the file, the item or column, the snapshot and what
+was expected.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gripdem.data.h5io import atomic_path, atomic_write_text
+from gripdem.data.schema import DatasetError
+
+#: coordinate column sets, in the order of preference when a dump holds several
+COORDINATE_KINDS = {
+    "wrapped": ("x", "y", "z"),
+    "scaled": ("xs", "ys", "zs"),
+    "unwrapped": ("xu", "yu", "zu"),
+    "scaled_unwrapped": ("xsu", "ysu", "zsu"),
+}
+IMAGE_FLAGS = ("ix", "iy", "iz")
+VELOCITIES = ("vx", "vy", "vz")
+#: every column read (others are skipped); ``id`` and ``type`` are read as integers
+KNOWN_COLUMNS = (
+    ("id", "type", "radius", "diameter")
+    + tuple(c for cols in COORDINATE_KINDS.values() for c in cols)
+    + IMAGE_FLAGS
+    + VELOCITIES
+)
+_INTEGER_COLUMNS = ("id", "type") + IMAGE_FLAGS
+FLOAT = "%.17g"  # repr precision: a dump written here reads back to the same float64
+
+
+class DumpError(DatasetError):
+    """Bad dump input: names the file, the item or column, the snapshot and the expectation."""
+
+
+@dataclass
+class DumpFrame:
+    """One snapshot as written (LAMMPS axes and units).
+
+    timestep: the ``ITEM: TIMESTEP`` value; bounds: ``(3, 2)`` the box bounds lines;
+    tilt: ``(3,)`` ``xy, xz, yz`` (zeros for an orthogonal box; ``triclinic`` says which);
+    flags: boundary flags (``("pp", "pp", "pp")``; empty when the header has none);
+    columns: the ``ITEM: ATOMS`` column names in file order; data: the known columns present,
+    ``(atoms,)`` each (``int64`` for ids, types and image flags, else ``float64``);
+    items: other items' text (e.g. ``{"UNITS": "lj"}``).
+    """
+
+    source: str
+    index: int
+    timestep: int
+    bounds: np.ndarray
+    tilt: np.ndarray
+    triclinic: bool
+    flags: tuple[str, ...]
+    columns: tuple[str, ...]
+    data: dict[str, np.ndarray]
+    items: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def n_atoms(self) -> int:
+        return int(self.data["id"].shape[0]) if "id" in self.data else 0
+
+    @property
+    def where(self) -> str:
+        return f"snapshot {self.index} (TIMESTEP {self.timestep})"
+
+    @property
+    def lo(self) -> np.ndarray:
+        """``(3,)`` origin of the (tilted) cell: the bounding box corrected for the tilt."""
+        xy, xz, yz = self.tilt
+        return self.bounds[:, 0] - np.array([min(0.0, xy, xz, xy + xz), min(0.0, yz), 0.0])
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """``(3,)`` ``Lx, Ly, Lz``: the cell's extent along each LAMMPS axis."""
+        xy, xz, yz = self.tilt
+        hi = self.bounds[:, 1] - np.array([max(0.0, xy, xz, xy + xz), max(0.0, yz), 0.0])
+        return hi - self.lo
+
+    @property
+    def cell(self) -> np.ndarray:
+        """``(3, 3)`` lattice vectors as rows: ``a = (Lx,0,0), b = (xy,Ly,0), c = (xz,yz,Lz)``."""
+        lx, ly, lz = self.lengths
+        xy, xz, yz = self.tilt
+        return np.array([[lx, 0.0, 0.0], [xy, ly, 0.0], [xz, yz, lz]])
+
+    def coordinate_kind(self) -> str:
+        """The first complete coordinate column set (see :data:`COORDINATE_KINDS`)."""
+        for kind, cols in COORDINATE_KINDS.items():
+            if all(c in self.data for c in cols):
+                return kind
+        partial = [c for cols in COORDINATE_KINDS.values() for c in cols if c in self.data]
+        raise DumpError(
+            self.source,
+            "ITEM: ATOMS",
+            f"{self.where}: expected a complete set of coordinate columns (x y z, xs ys zs, "
+            f"xu yu zu or xsu ysu zsu), found {partial or 'none'} among {list(self.columns)}",
+        )
+
+    def positions(self, kind: str) -> np.ndarray:
+        """``(atoms, 3)`` Cartesian coordinates of column set ``kind`` (scaled ones through
+        the cell: ``r = lo + s @ cell``)."""
+        cols = COORDINATE_KINDS[kind]
+        values = np.stack([self.data[c] for c in cols], axis=-1)
+        if kind.startswith("scaled"):
+            return self.lo + values @ self.cell
+        return values
+
+    def image_flags(self) -> np.ndarray | None:
+        """``(atoms, 3)`` integer image flags, or None when the dump has none."""
+        if not all(c in self.data for c in IMAGE_FLAGS):
+            return None
+        return np.stack([self.data[c] for c in IMAGE_FLAGS], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------
+def _open_text(path: Path) -> io.TextIOBase:
+    with open(path, "rb") as raw:
+        magic = raw.read(2)
+    if magic == b"\x1f\x8b" or path.suffix == ".gz":
+        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8", errors="replace")
+    return open(path, encoding="utf-8", errors="replace")
+
+
+class _Lines:
+    """Line iterator that knows the line number (for messages)."""
+
+    def __init__(self, handle, label: str):
+        self.handle, self.label, self.number = handle, label, 0
+        self.pending: str | None = None
+
+    def next(self) -> str | None:
+        if self.pending is not None:
+            line, self.pending = self.pending, None
+            return line
+        line = self.handle.readline()
+        if not line:
+            return None
+        self.number += 1
+        return line.rstrip("\r\n")
+
+    def push(self, line: str) -> None:
+        self.pending = line
+
+    def value(self, item: str, where: str) -> str:
+        line = self.next()
+        if line is None or line.startswith("ITEM:"):
+            raise DumpError(
+                self.label, f"ITEM: {item}", f"{where}: expected a value after line {self.number}"
+            )
+        return line.strip()
+
+
+def _int(text: str, label: str, item: str, where: str) -> int:
+    try:
+        return int(text.split()[0])
+    except (ValueError, IndexError):
+        raise DumpError(
+            label, f"ITEM: {item}", f"{where}: expected an integer, got {text!r}"
+        ) from None
+
+
+def _box(lines: _Lines, header: str, where: str) -> tuple[np.ndarray, np.ndarray, bool, tuple]:
+    words = header.split()[3:]  # after "ITEM: BOX BOUNDS"
+    if "abc" in words or "origin" in words:
+        raise DumpError(
+            lines.label,
+            "ITEM: BOX BOUNDS",
+            f"{where}: general triclinic boxes ('abc origin', dump_modify triclinic/general) "
+            "are not supported; dump the restricted triclinic box (the default)",
+        )
+    triclinic = words[:3] == ["xy", "xz", "yz"]
+    flags = tuple(words[3:] if triclinic else words)
+    rows = []
+    for axis in "xyz":
+        line = lines.value("BOX BOUNDS", where)
+        try:
+            values = [float(v) for v in line.split()]
+        except ValueError:
+            values = []
+        if len(values) != (3 if triclinic else 2):
+            raise DumpError(
+                lines.label,
+                "ITEM: BOX BOUNDS",
+                f"{where}: expected '{axis}lo {axis}hi{' tilt' if triclinic else ''}' "
+                f"({3 if triclinic else 2} numbers) on line {lines.number}, got {line!r}",
+            )
+        rows.append(values)
+    rows = np.asarray(rows, dtype=np.float64)
+    tilt = rows[:, 2].copy() if triclinic else np.zeros(3)
+    return rows[:, :2].copy(), tilt, triclinic, flags
+
+
+def _atoms(lines: _Lines, header: str, n: int, where: str) -> tuple[tuple, dict]:
+    columns = tuple(header.split()[2:])
+    if len(set(columns)) != len(columns):
+        raise DumpError(lines.label, "ITEM: ATOMS", f"{where}: repeated column in {columns}")
+    rows = []
+    for k in range(n):
+        line = lines.next()
+        if line is None or line.startswith("ITEM:"):
+            raise DumpError(
+                lines.label,
+                "ITEM: ATOMS",
+                f"{where}: expected {n} atom lines (ITEM: NUMBER OF ATOMS), the "
+                f"{'file ends' if line is None else 'next ITEM starts'} after {k}: truncated?",
+            )
+        rows.append(line)
+    tokens = " ".join(rows).split()
+    if len(tokens) != n * len(columns):
+        raise DumpError(
+            lines.label,
+            "ITEM: ATOMS",
+            f"{where}: expected {len(columns)} values per atom line ({' '.join(columns)}), "
+            f"got {len(tokens)} values on {n} lines",
+        )
+    table = np.asarray(tokens, dtype=object).reshape(n, len(columns))
+    data = {}
+    for j, name in enumerate(columns):
+        if name not in KNOWN_COLUMNS:
+            continue
+        try:
+            values = table[:, j].astype(np.float64)
+        except ValueError:
+            raise DumpError(
+                lines.label, f"ITEM: ATOMS column {name}", f"{where}: expected numbers"
+            ) from None
+        if name in _INTEGER_COLUMNS:
+            if not np.all(values == np.round(values)):
+                raise DumpError(
+                    lines.label, f"ITEM: ATOMS column {name}", f"{where}: expected integers"
+                )
+            values = values.astype(np.int64)
+        data[name] = values
+    return columns, data
+
+
+def read_dump(path: str | os.PathLike) -> Iterator[DumpFrame]:
+    """Snapshots of one dump file (gzip allowed), in file order. Raises :class:`DumpError`."""
+    path = Path(path)
+    label = str(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such dump file")
+    with _open_text(path) as handle:
+        lines = _Lines(handle, label)
+        index = 0
+        while True:
+            line = lines.next()
+            while line is not None and not line.strip():
+                line = lines.next()
+            if line is None:
+                if index == 0:
+                    raise DumpError(label, "ITEM: TIMESTEP", "expected a snapshot; file is empty")
+                return
+            if line.strip() != "ITEM: TIMESTEP":
+                raise DumpError(
+                    label,
+                    "ITEM: TIMESTEP",
+                    f"expected 'ITEM: TIMESTEP' to start snapshot {index} on line "
+                    f"{lines.number}, got {line[:60]!r}: is this a LAMMPS text dump?",
+                )
+            where = f"snapshot {index}"
+            timestep = _int(lines.value("TIMESTEP", where), label, "TIMESTEP", where)
+            where = f"snapshot {index} (TIMESTEP {timestep})"
+            n = bounds = None
+            items: dict[str, str] = {}
+            while True:
+                line = lines.next()
+                if line is None:
+                    raise DumpError(label, "ITEM: ATOMS", f"{where}: file ends before ITEM: ATOMS")
+                if not line.startswith("ITEM:"):
+                    continue
+                name = line[5:].strip()
+                if name == "NUMBER OF ATOMS":
+                    n = _int(lines.value(name, where), label, name, where)
+                elif name.startswith("BOX BOUNDS"):
+                    bounds, tilt, triclinic, flags = _box(lines, line, where)
+                elif name.startswith("ATOMS"):
+                    break
+                elif name == "TIMESTEP":
+                    raise DumpError(label, "ITEM: ATOMS", f"{where}: next snapshot before ATOMS")
+                else:
+                    items[name.split()[0]] = lines.value(name, where)
+            for item, value in (("NUMBER OF ATOMS", n), ("BOX BOUNDS", bounds)):
+                if value is None:
+                    raise DumpError(label, f"ITEM: {item}", f"{where}: missing before ITEM: ATOMS")
+            columns, data = _atoms(lines, line, n, where)
+            if "id" not in data:
+                raise DumpError(
+                    label,
+                    "ITEM: ATOMS column id",
+                    f"{where}: expected an 'id' column to follow particles between snapshots, "
+                    f"got columns {list(columns)}",
+                )
+            yield DumpFrame(
+                label, index, timestep, bounds, tilt, triclinic, flags, columns, data, items
+            )
+            index += 1
+
+
+# --------------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------------
+def bounds_of(lo: np.ndarray, lengths: np.ndarray, tilt: np.ndarray | None) -> np.ndarray:
+    """``(3, 2)`` the ``BOX BOUNDS`` lines (bounding box of a tilted cell) of origin ``lo``,
+    extents ``lengths`` and tilt ``xy, xz, yz`` (None: orthogonal)."""
+    lo = np.asarray(lo, np.float64)
+    hi = lo + np.asarray(lengths, np.float64)
+    if tilt is None:
+        return np.stack([lo, hi], axis=-1)
+    xy, xz, yz = (float(v) for v in tilt)
+    low = lo + np.array([min(0.0, xy, xz, xy + xz), min(0.0, yz), 0.0])
+    high = hi + np.array([max(0.0, xy, xz, xy + xz), max(0.0, yz), 0.0])
+    return np.stack([low, high], axis=-1)
+
+
+def dump_text(
+    timesteps: np.ndarray,
+    lo: np.ndarray,
+    lengths: np.ndarray,
+    positions: np.ndarray,
+    tilt: np.ndarray | None = None,
+    columns: dict[str, np.ndarray] | None = None,
+    ids: np.ndarray | None = None,
+    float_format: str = FLOAT,
+) -> str:
+    """Dump text of ``positions`` ``(frames, atoms, 3)`` (LAMMPS axes, columns ``x y z``).
+
+    ``tilt``: ``(frames, 3)`` ``xy xz yz`` per frame (None: orthogonal box); ``columns``: extra
+    per-atom columns ``name -> (frames, atoms)`` or ``(atoms,)``, written after ``x y z``;
+    ids default to ``1..N``, type 1."""
+    positions = np.asarray(positions, np.float64)
+    frames, n, _ = positions.shape
+    ids = np.arange(1, n + 1) if ids is None else np.asarray(ids)
+    extra = {
+        k: np.broadcast_to(np.asarray(v, np.float64), (frames, n))
+        for k, v in (columns or {}).items()
+    }
+    header = "ITEM: ATOMS id type x y z" + "".join(f" {k}" for k in extra) + "\n"
+    fmt = "%d %d " + " ".join([float_format] * (3 + len(extra)))
+    buf = io.StringIO()
+    for j in range(frames):
+        t = None if tilt is None else np.asarray(tilt, np.float64)[j]
+        buf.write(f"ITEM: TIMESTEP\n{int(timesteps[j])}\nITEM: NUMBER OF ATOMS\n{n}\n")
+        buf.write("ITEM: BOX BOUNDS " + ("pp pp pp" if t is None else "xy xz yz pp pp pp") + "\n")
+        for axis, (low, high) in enumerate(bounds_of(lo, lengths, t)):
+            tail = "" if t is None else f" {float(t[axis])!r}"
+            buf.write(f"{float(low)!r} {float(high)!r}{tail}\n")
+        buf.write(header)
+        table = np.column_stack([ids, np.ones(n), positions[j], *(v[j] for v in extra.values())])
+        np.savetxt(buf, table, fmt=fmt)
+    return buf.getvalue()
+
+
+def write_dump(path: str | os.PathLike, text: str, overwrite: bool = False) -> Path:
+    """Write dump text atomically (gzip-compressed when ``path`` ends in ``.gz``)."""
+    path = Path(path)
+    if path.suffix != ".gz":
+        return atomic_write_text(path, text, overwrite)
+    with atomic_path(path, overwrite) as tmp:
+        with gzip.open(tmp, "wt", encoding="utf-8") as handle:
+            handle.write(text)
+    return path

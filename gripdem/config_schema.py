@@ -206,6 +206,11 @@ def check_combination(cfg: DictConfig) -> None:
             "model.encoder.name=interaction needs the exact frame: model.encoding=unwrapped, "
             f"got {cfg.model.encoding.value}"
         )
+    if cfg.model.ar_prior and not exact:
+        raise ValueError(
+            "model.ar_prior=true adds the linear AR forecast in the exact frame: it needs "
+            f"model.encoding=unwrapped, got {cfg.model.encoding.value}"
+        )
     if not exact:
         log.info(
             "model.encoding=%s: the paper's wrapped-space decoding (for reproduction; not exact "

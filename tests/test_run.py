@@ -92,6 +92,16 @@ def test_the_interaction_encoder_refuses_the_paper_frame():
         check_combination(cfg)
 
 
+def test_the_ar_prior_refuses_the_paper_frame():
+    from gripdem.config_schema import check_combination
+
+    cfg = compose_run(["model=grip_paper", "model.ar_prior=true"], hydra_node=False)
+    with pytest.raises(ValueError, match="ar_prior"):
+        check_combination(cfg)
+    assert compose_run(["model=interaction"]).model.ar_prior
+    assert not compose_run(["model=grip"]).model.ar_prior
+
+
 @pytest.mark.parametrize(
     ("override", "message"),
     [

@@ -349,6 +349,8 @@ def read_lammps(
         found = find_crossings(list(zip(positions, times, strict=True)), box, describe)
         evidence = _check_crossers(found, box, le, diameter, series[0].label)
     else:
+        if not series[0].velocity_image_known:  # unwrapped coordinates: crossings show once
+            reference = wrap_positions(reference, box)  # the positions are in the box
         found = find_crossings(list(zip(reference, times, strict=True)), box, describe)
         le, evidence = infer_lees_edwards(
             found,

@@ -217,9 +217,10 @@ def test_split_files_are_simulations_and_the_cli_writes_the_dataset(tmp_path, ca
     assert "refusing to overwrite" in capsys.readouterr().err
 
 
-def test_orthogonal_periodic_box_and_an_axis_map(tmp_path):
+@pytest.mark.parametrize("coordinates", [["x", "y", "z"], ["xu", "yu", "zu"]])
+def test_orthogonal_periodic_box_and_an_axis_map(tmp_path, coordinates):
     positions, velocities, times, offsets = reference(sheared=False)
-    cols = ["id", "x", "y", "z"]
+    cols = ["id", *coordinates]
     snaps = dump_variant(positions, velocities, times, offsets, cols, tilted=False)
     path = write(tmp_path / "pbc.dump", snaps)
     data, report = read_lammps([path], diameter=D, timestep=ENGINE_DT, axes="yzx")

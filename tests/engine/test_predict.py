@@ -1,0 +1,142 @@
+"""``python -m gripdem.predict``: a real checkpoint applied to a dataset, its outputs, and the
+refusal of scenes, encodings and particle counts the model cannot serve."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import h5py
+import numpy as np
+import pytest
+
+from gripdem.boundary import Boundary, Box, LeesEdwards
+from gripdem.checkpoint import IncompatibleError, check_compatible, training_overlap
+from gripdem.data.schema import read_dataset, read_meta, write_dataset
+from gripdem.predict import main
+from gripdem.predictions import evaluate_predictions, read_predictions
+
+
+def run(checkpoint, data, out, *extra):
+    return main([str(checkpoint), str(data), "--out", str(out), *map(str, extra)])
+
+
+def test_predict_writes_predictions_trajectory_and_report(tmp_path, capsys, le_file, le_checkpoint):
+    out = tmp_path / "pred.h5"
+    # start 25: frames 25..30 observed, 31..39 have a truth, 40..52 do not
+    assert run(le_checkpoint, le_file, out, "--start", 25, "--frames", 22, "--sims", 0, 2) == 0
+    printed = capsys.readouterr().out
+    assert "predicted 22 of 22 frame(s) (31..52) in links of 5" in printed
+    assert "constant_velocity" in printed and "note: in-sample check" in printed
+    p = read_predictions(out)
+    assert p.pred_positions.shape == (2, 9, 24, 3) and p.horizon == 9
+    assert list(p.sim_index) == [0, 2] and list(p.window_start) == [25, 25]
+    assert set(p.baselines) == {"stay", "constant_velocity", "linear_ar", "mean_flow"}
+    # the untrained model is constant velocity, chained or not
+    assert np.abs(p.pred_positions - p.baselines["constant_velocity"]).max() < 1e-15
+    truth = read_dataset(le_file)
+    np.testing.assert_array_equal(p.true_positions[1], truth.positions[2, 31:40])
+    metrics = evaluate_predictions(out)
+    report = json.loads((tmp_path / "pred_rollout.json").read_text())
+    assert report["truth_frames"] == 9 and report["predicted_frames"] == [31, 52]
+    assert report["rmse_over_d"]["model"] == pytest.approx(
+        [metrics[f"rmse_step/{j:03d}"] / truth.diameter for j in range(1, 10)]
+    )
+    assert len(report["divergence"]["max_step_over_d"]) == 22
+    trajectory = read_dataset(tmp_path / "pred_trajectory.h5")
+    assert trajectory.positions.shape == (2, 6 + 22, 24, 3)
+    np.testing.assert_array_equal(trajectory.positions[:, :6], truth.positions[[0, 2], 25:31])
+    assert trajectory.boundary == truth.boundary
+    assert trajectory.provenance["parameters"]["checkpoint"] == str(le_checkpoint)
+    # existing outputs are kept
+    assert run(le_checkpoint, le_file, out, "--start", 25) == 1
+    assert "refusing to overwrite" in capsys.readouterr().err
+
+
+def test_predict_from_the_last_frames_writes_the_rollout_only(
+    tmp_path, capsys, le_file, le_checkpoint
+):
+    out = tmp_path / "pred.h5"
+    assert run(le_checkpoint, le_file, out, "--start", 34, "--frames", 7, "--no-overlap") == 0
+    assert "not written" in capsys.readouterr().out
+    assert not out.exists() and (tmp_path / "pred_trajectory.h5").exists()
+    assert run(le_checkpoint, le_file, tmp_path / "b.h5", "--start", 35) == 1
+    assert "--start 35: the model reads 6 observed frames" in capsys.readouterr().err
+
+
+def _variant(source, tmp_path, name, **changes):
+    data = read_dataset(source)
+    box = changes.pop("box", None)
+    if box is not None:
+        scale = box.lengths / data.box.lengths
+        le = data.boundary.lees_edwards
+        data = replace(data, positions=data.positions * scale, boundary=Boundary(box, le))
+    return write_dataset(tmp_path / f"{name}.h5", replace(data, **changes))
+
+
+def test_incompatible_scenes_are_refused_with_the_field(
+    tmp_path, capsys, le_file, pbc_file, le_checkpoint
+):
+    data = read_dataset(le_file)
+    le = data.boundary.lees_edwards
+    flipped = Boundary(data.box, LeesEdwards(le.shear_rate, -le.sign, le.time_origin))
+    cases = {
+        "boundary": pbc_file,
+        "diameter": _variant(le_file, tmp_path, "d", radius=0.6 * data.diameter),
+        "frame_interval": _variant(le_file, tmp_path, "dt", times=data.times * 1.5),
+        "shear_rate": _variant(le_file, tmp_path, "sign", boundary=flipped),
+    }
+    for field, path in cases.items():
+        assert run(le_checkpoint, path, tmp_path / f"{field}.h5") == 1
+        err = capsys.readouterr().err
+        assert f"field '{field}'" in err and str(path) in err and str(le_checkpoint) in err
+        assert not (tmp_path / f"{field}.h5").exists()
+    assert "opposite flow directions: mirror the data's z axis" in err
+
+
+def test_box_rules_and_the_dense_graph_particle_count(
+    tmp_path, le_file, le_checkpoint, make_checkpoint
+):
+    bigger = Box(*(1.25 * read_meta(le_file).box.lengths))
+    other_box = _variant(le_file, tmp_path, "box", box=bigger)
+    # the default model reads relative geometry only: applied in the data's box, with a note
+    _, notes = check_compatible(le_checkpoint, read_meta(other_box))
+    assert any("applied in the data's box" in n for n in notes)
+    paper = make_checkpoint(le_file, tmp_path / "paper", ["scene=lebc", "model=grip_paper"])
+    with pytest.raises(IncompatibleError, match="field 'box'.*sincos encoding"):
+        check_compatible(paper, read_meta(other_box))
+    dense = make_checkpoint(
+        le_file,
+        tmp_path / "dense",
+        ["scene=lebc", "model=grip_paper", "model.encoder.trainable_graph=dense"],
+    )
+    check_compatible(dense, read_meta(le_file))
+    data = read_dataset(le_file)
+    fewer = _variant(le_file, tmp_path, "fewer", positions=data.positions[:, :, :20])
+    with pytest.raises(IncompatibleError, match="dense n x n graph.*24 particles.*has 20"):
+        check_compatible(dense, read_meta(fewer))
+    with pytest.raises(ValueError, match="not a readable PyTorch checkpoint"):
+        check_compatible(le_file, read_meta(le_file))
+
+
+def test_in_sample_check_reads_the_run_metrics(tmp_path, le_file, le_checkpoint):
+    metrics = le_checkpoint.parent.parent / "metrics.json"
+    summary = {"path": str(le_file), "protocol": "sims", "sims_train": [0], "sims_val": [1]}
+    metrics.write_text(json.dumps({"data": summary}))
+    try:
+        assert training_overlap(le_checkpoint, le_file, [0, 2], 10)[:2] == (True, "paper")
+        assert training_overlap(le_checkpoint, le_file, [2], 10)[:2] == (False, "sims")
+        assert "validation" in training_overlap(le_checkpoint, le_file, [1], 10)[2]
+        assert training_overlap(le_checkpoint, tmp_path / "x.h5", [0], 10)[0] is False
+        summary.update(protocol="time", sims_train=[0, 1, 2], time_boundaries=[24, 32])
+        metrics.write_text(json.dumps({"data": summary}))
+        assert training_overlap(le_checkpoint, le_file, [0], 20)[:2] == (True, "paper")
+        assert training_overlap(le_checkpoint, le_file, [0], 24)[:2] == (False, "time")
+        out = tmp_path / "p.h5"
+        assert run(le_checkpoint, le_file, out, "--start", 0, "--sims", 1, "--no-overlap") == 0
+        p = read_predictions(out)
+        assert p.in_sample and p.protocol == "paper"
+        with h5py.File(out) as h5:
+            assert json.loads(h5.attrs["run"])["sims"] == [1]
+    finally:
+        metrics.unlink()

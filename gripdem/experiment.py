@@ -29,6 +29,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
 from gripdem.config_schema import check_combination
+from gripdem.console import lightning_info_muted, quiet_console
 from gripdem.data.cache import ensure_scene_dataset
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
@@ -207,19 +208,10 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
     return "\n".join(rows)
 
 
-def route_lightning_logs() -> None:
-    """Let Lightning's log lines reach Hydra's handlers (console and the job's log file) once,
-    instead of through Lightning's own console handler as well."""
-    for name in ("lightning.pytorch", "lightning.fabric"):
-        logger = logging.getLogger(name)
-        logger.handlers.clear()
-        logger.propagate = True
-
-
 def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     """Train and test one configuration; returns the metrics written to ``metrics.json``."""
     out_dir = Path(out_dir)
-    route_lightning_logs()
+    quiet_console()
     if cfg.torch_threads:
         torch.set_num_threads(int(cfg.torch_threads))
     check_combination(cfg)
@@ -243,13 +235,14 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     if torch.distributed.is_available() and torch.distributed.is_initialized():
         torch.distributed.destroy_process_group()  # test on one process, all windows at once
     best = trainer.checkpoint_callback.best_model_path or None
-    test_trainer = L.Trainer(
-        accelerator=cfg.trainer.accelerator if cfg.trainer.get("strategy") is None else "cpu",
-        devices=1,
-        logger=logger,
-        enable_progress_bar=False,
-        enable_checkpointing=False,
-    )
+    with lightning_info_muted():  # the fit's Trainer has said which devices there are
+        test_trainer = L.Trainer(
+            accelerator=cfg.trainer.accelerator if cfg.trainer.get("strategy") is None else "cpu",
+            devices=1,
+            logger=logger,
+            enable_progress_bar=False,
+            enable_checkpointing=False,
+        )
     if best:  # the best validation rollout, not the last epoch
         model = TrajectoryModule.load_from_checkpoint(best, map_location="cpu")
     test_trainer.test(model, dm, verbose=False)
@@ -286,8 +279,10 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     write_outputs(cfg, out_dir, predictions, logger, trainer.global_step)
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
     logger.finalize("success")
+    title = f"{cfg.scene.name} / {cfg.split.name} / {cfg.model.name} (seed {cfg.seed})"
+    print(f"\n== gripdem result: {title} ==")
     print(result_table(metrics, dm.meta.diameter, dm.in_sample))
-    print(f"outputs: {out_dir}")
+    print(f"outputs: {out_dir}\n")
     return report
 
 

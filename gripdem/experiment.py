@@ -261,9 +261,14 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     }
     metrics.update(hp_values)
     predictions = to_predictions(results, dm, hp)
-    metrics.update(physics_metrics(predictions))
+    physics, physics_report = physics_metrics(predictions)
+    metrics.update(physics)
     logger.log_metrics(
-        {k: v for k, v in metrics.items() if k.startswith(("hp/", "test/physics/"))},
+        {
+            k: v
+            for k, v in metrics.items()
+            if k.startswith(("hp/", "test/physics/", "test/crossers/"))
+        },
         step=trainer.global_step,
     )
     report = {
@@ -276,7 +281,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         "hparams": hp,
         "data": dm.summary(),
     }
-    write_outputs(cfg, out_dir, predictions, logger, trainer.global_step)
+    write_outputs(cfg, out_dir, predictions, logger, trainer.global_step, physics_report)
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
     logger.finalize("success")
     title = f"{cfg.scene.name} / {cfg.split.name} / {cfg.model.name} (seed {cfg.seed})"
@@ -286,33 +291,38 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     return report
 
 
-def physics_metrics(predictions: Predictions) -> dict[str, float]:
-    """Overlap fraction at the last predicted step (model and truth), velocity-profile error
-    and mean-squared displacement, as ``test/physics/...`` (SPEC §6)."""
-    from gripdem.physics import physics_summary
+def physics_metrics(predictions: Predictions) -> tuple[dict[str, float], Any]:
+    """The physics report of the test windows (truth, model and every baseline side by side,
+    :mod:`gripdem.physics_report`) as ``test/physics/<set>/<name>`` and, in an LE box,
+    ``test/crossers/...`` (RMSE of the crossers with a bootstrap interval); and the report."""
+    from gripdem.physics_report import physics_report
 
-    p = predictions
-    values = physics_summary(
-        p.pred_positions,
-        p.true_positions,
-        p.last_positions,
-        p.box,
-        p.diameter,
-        p.offsets(),
-        p.offset_increment,
-    )
-    return {f"test/physics/{k}": float(v) for k, v in values.items()}
+    report = physics_report(predictions)
+    out = {}
+    for key, value in report.metrics.items():
+        prefix = "test/" if key.startswith("crossers/") else "test/physics/"
+        out[prefix + key] = float(value)
+    return out, report
 
 
-def write_outputs(cfg, out_dir: Path, predictions: Predictions, logger, step: int) -> None:
-    """predictions.h5, figures (PNG + TensorBoard images) and XYZ trajectories."""
+def write_outputs(
+    cfg, out_dir: Path, predictions: Predictions, logger, step: int, physics_report=None
+) -> None:
+    """predictions.h5, figures (PNG + TensorBoard images; the physics figure from the report)
+    and XYZ trajectories."""
     outputs = plain(cfg.outputs)
     if outputs["predictions"]:
         write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
     if outputs["figures"]:
         from gripdem.plots import make_run_figures
 
-        make_run_figures(predictions, out_dir / "figures", writer=logger.experiment, step=step)
+        make_run_figures(
+            predictions,
+            out_dir / "figures",
+            writer=logger.experiment,
+            step=step,
+            physics=physics_report,
+        )
     if outputs["export_xyz"]:
         from gripdem.export import export_extxyz
 

@@ -272,38 +272,3 @@ def profile_basis(x: Array, box: Box, kind: str) -> np.ndarray:
     if kind == "linear":
         return np.stack([x, np.ones_like(x)], -1)
     raise ValueError(f"profile kind must be one of {PROFILE_KINDS}, got {kind!r}")
-
-
-def physics_summary(
-    pred: Array,
-    true: Array,
-    last_positions: Array,
-    box: Box,
-    diameter: float,
-    offsets: Array | None = None,
-    offset_increment: float = 0.0,
-    tol: float = OVERLAP_TOLERANCE,
-    bins: int = 16,
-) -> dict[str, float]:
-    """Scalar physics metrics of a set of windows, the truth's value beside the model's:
-
-    - ``overlap_fraction`` / ``overlap_fraction_true``: at the last predicted step, fraction of
-      particles with a neighbour closer than ``tol * diameter``;
-    - ``velocity_profile_error_over_d``: RMS difference of the binned z-velocity profiles,
-      diameters per frame;
-    - ``msd_last_over_d2`` / ``msd_last_true_over_d2``: MSD at the last step, diameters squared
-      (``offset_increment`` as in :func:`mean_squared_displacement`).
-    """
-    pred, true, last = _np(pred), _np(true), _np(last_positions)
-    _, _, off = _windows(true, last, offsets)
-    out = {
-        "overlap_fraction": overlap_fraction(pred[:, -1], box, diameter, off[:, -1], tol),
-        "overlap_fraction_true": overlap_fraction(true[:, -1], box, diameter, off[:, -1], tol),
-    }
-    _, vp, _ = velocity_profile(pred, last, box, off, bins=bins)
-    _, vt, _ = velocity_profile(true, last, box, off, bins=bins)
-    out["velocity_profile_error_over_d"] = velocity_profile_error(vp, vt) / diameter
-    for key, pos in (("msd_last_over_d2", pred), ("msd_last_true_over_d2", true)):
-        msd = mean_squared_displacement(pos, last, box, off, offset_increment)
-        out[key] = float(msd[-1]) / diameter**2
-    return out

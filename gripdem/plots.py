@@ -17,7 +17,9 @@ Figures (names as returned by :func:`make_run_figures`):
 - ``parity_z``: predicted vs true z, particles crossing an x face in the horizon (the LE
   crossers) vs the rest;
 - ``pair_distances``: histogram of minimum-image pair distances at the last predicted step,
-  model and truth, with d and the overlap tolerance marked and both overlap fractions printed.
+  model and truth, with d and the overlap tolerance marked and both overlap fractions printed;
+- ``physics`` (given a physics report, :mod:`gripdem.plots_physics`): velocity profile, g(r),
+  non-affine MSD and displacement distribution of the truth, the model and every baseline.
 """
 
 from __future__ import annotations
@@ -363,15 +365,22 @@ def run_figures(
     p: Predictions,
     imposed: Callable[[np.ndarray], np.ndarray] | None = None,
     imposed_label: str = "imposed",
+    physics: Any = None,
 ) -> dict[str, Figure]:
-    """All figures of :data:`FIGURES` for one run, by name."""
-    return {
+    """All figures of :data:`FIGURES` for one run, by name, and ``physics`` (truth, model and
+    baselines side by side) when a :class:`~gripdem.physics_report.PhysicsReport` is given."""
+    figures = {
         "rmse_per_step": plot_rmse_per_step(p),
         "crossers": plot_crossers(p),
         "velocity_profile": plot_velocity_profile(p, imposed, imposed_label),
         "parity_z": plot_parity_z(p),
         "pair_distances": plot_pair_distances(p),
     }
+    if physics is not None:
+        from gripdem.plots_physics import plot_physics
+
+        figures["physics"] = plot_physics(physics, p.title(), _model_name(p))
+    return figures
 
 
 def make_run_figures(
@@ -382,6 +391,7 @@ def make_run_figures(
     writer: Any = None,
     step: int = 0,
     tag_prefix: str = "figures/",
+    physics: Any = None,
 ) -> dict[str, Path]:
     """Draw every figure of a run, write ``out_dir/<name>.png`` and return ``{name: path}``.
 
@@ -392,7 +402,7 @@ def make_run_figures(
     p = source if isinstance(source, Predictions) else read_predictions(source)
     out_dir = Path(out_dir)
     paths: dict[str, Path] = {}
-    for name, fig in run_figures(p, imposed, imposed_label).items():
+    for name, fig in run_figures(p, imposed, imposed_label, physics).items():
         path = out_dir / f"{name}.png"
         image = save_figure(fig, path)
         if writer is not None:

@@ -46,7 +46,6 @@ from gripdem.data.schema import (
     read_float_attr,
     validate_positions,
 )
-from gripdem.physics import physics_summary
 
 FORMAT_NAME = "gripdem-predictions"
 FORMAT_VERSION = 1
@@ -301,9 +300,9 @@ def evaluate_predictions(
     Keys: the model's :func:`gripdem.metrics.summarize` keys (``rmse``, ``rmse_over_d``,
     ``rmse_step/001`` ..., and for LE data ``rmse_crossers``, ``rmse_others``, ``n_crossers``);
     the same under ``baseline/<name>/`` for each stored baseline; with ``physics=True`` the
-    :func:`gripdem.physics.physics_summary` keys (``overlap_fraction``,
-    ``overlap_fraction_true``, ``velocity_profile_error_over_d``, ``msd_last_over_d2``,
-    ``msd_last_true_over_d2``); and ``n_windows``, ``n_particles``, ``horizon``, ``in_sample``.
+    physics report (:func:`gripdem.physics_report.physics_report`: ``physics/<set>/<name>`` for
+    the truth, the model and each baseline, and for LE data ``crossers/...`` with bootstrap
+    intervals); and ``n_windows``, ``n_particles``, ``horizon``, ``in_sample``.
     """
     p = source if isinstance(source, Predictions) else read_predictions(source)
     offsets = p.offsets()
@@ -312,17 +311,10 @@ def evaluate_predictions(
         for key, value in _summary(p, arr, offsets).items():
             out[f"baseline/{name}/{key}"] = value
     if physics:
-        out.update(
-            physics_summary(
-                p.pred_positions,
-                p.true_positions,
-                p.last_positions,
-                p.box,
-                p.diameter,
-                offsets,
-                p.offset_increment,
-            )
-        )
+        from gripdem.physics_report import physics_report
+
+        for key, value in physics_report(p).metrics.items():
+            out[key if key.startswith("crossers/") else f"physics/{key}"] = value
     out.update(
         n_windows=p.n_windows,
         n_particles=p.n_particles,

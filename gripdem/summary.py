@@ -51,8 +51,14 @@ DEFAULT_METRICS = (
     "test/rmse_linear_ar_crossers",
     "test/n_crossers",
     "val/rmse_best",
-    "test/physics/overlap_fraction",
-    "test/physics/overlap_fraction_true",
+    "test/crossers/model/ci_low_over_d",
+    "test/crossers/model/ci_high_over_d",
+    "test/physics/model/overlap_fraction",
+    "test/physics/truth/overlap_fraction",
+    "test/physics/model/gr_distance",
+    "test/physics/constant_velocity/gr_distance",
+    "test/physics/model/non_affine_rms_over_d",
+    "test/physics/truth/non_affine_rms_over_d",
     "train_seconds",
     "epochs",
     "in_sample",
@@ -151,6 +157,21 @@ def collect(sweep_dir: str | os.PathLike) -> list[Job]:
                 raise ValueError(f"{metrics_file}: not valid JSON ({exc})") from None
         jobs.append(Job(name, params, metrics))
     return sorted(jobs, key=lambda j: _job_number(j.name))
+
+
+def runs_by_group(sweeps: Iterable[str | os.PathLike]) -> dict[tuple[str, str, str], list[dict]]:
+    """``{(scene, split, model): [flattened metrics of each finished job]}`` over one or more
+    sweep folders, keyed by the run's own record (``hparams/...`` in ``metrics.json``), so that
+    seeds of one configuration in different sweeps land in one group."""
+    groups: dict[tuple[str, str, str], list[dict]] = {}
+    for sweep in sweeps:
+        for job in collect(sweep):
+            m = job.metrics
+            if not m or "hparams/model" not in m:
+                continue
+            key = (str(m["hparams/scene"]), str(m["hparams/split"]), str(m["hparams/model"]))
+            groups.setdefault(key, []).append(m)
+    return groups
 
 
 def varying_params(jobs: Sequence[Job]) -> list[str]:

@@ -16,7 +16,6 @@ from gripdem.physics import (
     neighbour_pairs,
     overlap_fraction,
     pair_distances,
-    physics_summary,
     radial_distribution,
     velocity_profile,
     velocity_profile_error,
@@ -202,12 +201,3 @@ def test_velocity_profile_recovers_an_affine_flow(kind):
     assert velocity_profile_error(vz + 0.1, vz) == pytest.approx(0.1)
     assert np.isnan(velocity_profile_error([np.nan], [1.0]))
     assert centres.shape == (8,)
-
-
-def test_physics_summary_on_a_perfect_prediction():
-    target, last, offsets, _ = le_ballistic(n=200, speed=0.01)
-    diameter = 0.15
-    out = physics_summary(target, target, last, BOX, diameter, offsets, LE.image_velocity(BOX) * DT)
-    assert out["overlap_fraction"] == out["overlap_fraction_true"] > 0
-    assert out["velocity_profile_error_over_d"] == 0.0
-    assert out["msd_last_over_d2"] == out["msd_last_true_over_d2"] > 0

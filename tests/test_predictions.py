@@ -117,8 +117,11 @@ def test_evaluate_recomputes_metrics_from_the_file(tmp_path):
     steps = [out[f"rmse_step/{k:03d}"] for k in range(1, 7)]
     assert math.sqrt(np.mean(np.square(steps))) == pytest.approx(out["rmse"])
     assert out["n_crossers"] > 0 and math.isfinite(out["rmse_crossers"])
-    assert out["overlap_fraction_true"] >= 0 and out["velocity_profile_error_over_d"] > 0
-    assert out["msd_last_true_over_d2"] > 0
+    assert out["physics/truth/overlap_fraction"] >= 0
+    assert out["physics/model/profile_error_over_d"] > 0
+    assert out["physics/truth/msd_last_over_d2"] > 0
+    assert out["crossers/n"] == out["n_crossers"]
+    assert out["crossers/model/rmse_over_d"] == pytest.approx(out["rmse_crossers"] / 0.1)
     assert (out["n_windows"], out["n_particles"], out["horizon"], out["in_sample"]) == (
         3,
         40,
@@ -130,7 +133,11 @@ def test_evaluate_recomputes_metrics_from_the_file(tmp_path):
     q = make_predictions(le=False)
     q.pred_positions = q.true_positions.copy()
     per = evaluate_predictions(q, physics=False)
-    assert per["rmse"] == 0.0 and "n_crossers" not in per and "overlap_fraction" not in per
+    assert (
+        per["rmse"] == 0.0
+        and "n_crossers" not in per
+        and not any(k.startswith("physics/") for k in per)
+    )
 
 
 def test_writer_refuses_to_overwrite_and_leaves_nothing_on_failure(tmp_path, monkeypatch):

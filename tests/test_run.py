@@ -162,7 +162,8 @@ def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request,
     assert {"_hparams_/experiment", "_hparams_/session_start_info"} <= plugin
     assert set(HP_METRICS) <= scalars
     assert {"train/loss", "val/rmse", "test/rmse", "test/rmse_linear_ar"} <= scalars
-    for name in ("rmse_per_step", "crossers", "velocity_profile", "parity_z", "pair_distances"):
+    figures = ("rmse_per_step", "crossers", "velocity_profile", "parity_z", "pair_distances")
+    for name in (*figures, "physics"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 5000
     assert (out / "checkpoints" / "best.ckpt").exists()
     assert (out / "trajectories" / "window000_pred.xyz").exists()
@@ -173,4 +174,8 @@ def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request,
         assert pred.shape == h5["true_positions"].shape
     assert np.all(pred >= -box / 2) and np.all(pred < box / 2)
     assert report["in_sample"] is False
-    assert 0.0 <= metrics["test/physics/overlap_fraction"] <= 1.0
+    assert 0.0 <= metrics["test/physics/model/overlap_fraction"] <= 1.0
+    for name in ("truth", "model", "constant_velocity", "linear_ar", "mean_flow", "stay"):
+        assert math.isfinite(metrics[f"test/physics/{name}/non_affine_rms_over_d"]), name
+    assert ("test/crossers/n" in metrics) == (scene == "lebc")
+    assert {"test/physics/model/gr_distance", "test/physics/truth/coordination_contact"} <= scalars

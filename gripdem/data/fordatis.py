@@ -47,7 +47,12 @@ import numpy as np
 
 import gripdem
 from gripdem.boundary import Boundary, Box, check_volume_fraction, wrap_positions
-from gripdem.data.le_inference import LeEvidence, find_crossings, infer_lees_edwards
+from gripdem.data.le_inference import (
+    LeEvidence,
+    check_le_options,
+    find_crossings,
+    infer_lees_edwards,
+)
 from gripdem.data.schema import TIME_RTOL, DatasetError, TrajectoryData, validate
 
 #: the paper's particle size, taken as a diameter (SPEC §2)
@@ -366,17 +371,9 @@ def _members(source: Path, workdir: Path, skipped: list[str]) -> Iterator[tuple[
 # the importer
 # --------------------------------------------------------------------------------------------
 def _check_options(shear_rate, le_sign, time_origin, drop_frames, diameter) -> None:
-    if shear_rate is not None and not (np.isfinite(shear_rate) and shear_rate > 0):
-        raise ValueError(
-            f"--shear-rate must be a positive rate in 1/s, got {shear_rate!r} (omit it for "
-            "periodic data; the flow direction is the LE sign, inferred or given with --le-sign)"
-        )
-    if le_sign is not None and le_sign not in (1, -1):
-        raise ValueError(f"--le-sign must be +1 or -1, got {le_sign!r}")
+    check_le_options(shear_rate, le_sign, time_origin, "1/s; omit it for periodic data")
     if shear_rate is None and (le_sign is not None or time_origin is not None):
         raise ValueError("--le-sign and --time-origin are for Lees-Edwards data: give --shear-rate")
-    if time_origin is not None and not np.isfinite(time_origin):
-        raise ValueError(f"--time-origin must be finite, got {time_origin!r}")
     if not (isinstance(drop_frames, int) and drop_frames >= 0):
         raise ValueError(f"--drop-frames must be a whole number >= 0, got {drop_frames!r}")
     if not (np.isfinite(diameter) and diameter > 0):

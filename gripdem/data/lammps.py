@@ -50,7 +50,12 @@ from gripdem.boundary import (
 from gripdem.data.lammps_dump import DumpError
 from gripdem.data.lammps_series import AxisMap, DumpSeries, read_series
 from gripdem.data.lammps_tilt import check_crossers, tilt_lees_edwards
-from gripdem.data.le_inference import LeEvidence, find_crossings, infer_lees_edwards
+from gripdem.data.le_inference import (
+    LeEvidence,
+    check_le_options,
+    find_crossings,
+    infer_lees_edwards,
+)
 from gripdem.data.schema import TrajectoryData, validate
 
 
@@ -104,15 +109,7 @@ def _check_options(diameter, timestep, shear_rate, le_sign, time_origin) -> None
     for name, value in (("--diameter", diameter), ("--timestep", timestep)):
         if not (value is not None and np.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a positive number (the dump's units), got {value!r}")
-    if shear_rate is not None and not (np.isfinite(shear_rate) and shear_rate > 0):
-        raise ValueError(
-            f"--shear-rate must be a positive rate, got {shear_rate!r} (the flow direction is "
-            "the LE sign, read from the tilt or given with --le-sign)"
-        )
-    if le_sign is not None and le_sign not in (1, -1):
-        raise ValueError(f"--le-sign must be +1 or -1, got {le_sign!r}")
-    if time_origin is not None and not np.isfinite(time_origin):
-        raise ValueError(f"--time-origin must be finite, got {time_origin!r}")
+    check_le_options(shear_rate, le_sign, time_origin, "the dump's units")
 
 
 def _combine(series: list[DumpSeries]) -> tuple[int, list[str]]:

@@ -38,6 +38,23 @@ ORIGIN_FLOOR = 0.02
 RATE_RTOL = 0.02
 
 
+def check_le_options(
+    shear_rate: float | None, le_sign: int | None, time_origin: float | None, units: str
+) -> None:
+    """The Lees-Edwards options every importer takes, checked with the option named:
+    ``--shear-rate`` positive (in ``units``; the flow direction is the sign), ``--le-sign``
+    +1 or -1, ``--time-origin`` finite."""
+    if shear_rate is not None and not (np.isfinite(shear_rate) and shear_rate > 0):
+        raise ValueError(
+            f"--shear-rate must be a positive rate ({units}), got {shear_rate!r} (the flow "
+            "direction is the LE sign, inferred from the data or given with --le-sign)"
+        )
+    if le_sign is not None and le_sign not in (1, -1):
+        raise ValueError(f"--le-sign must be +1 or -1, got {le_sign!r}")
+    if time_origin is not None and not np.isfinite(time_origin):
+        raise ValueError(f"--time-origin must be finite, got {time_origin!r}")
+
+
 @dataclass
 class Crossings:
     """Frame-to-frame moves of all simulations, split into x-face crossers and the rest.

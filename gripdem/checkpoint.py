@@ -64,12 +64,13 @@ def read_hparams(checkpoint: str | os.PathLike) -> dict[str, Any]:
 
 
 def data_scene(meta: DatasetMeta) -> dict[str, Any]:
-    """The ``scene`` hyperparameter of a model applied to ``meta``'s data."""
+    """The ``scene`` hyperparameter of a model trained on, or applied to, ``meta``'s data."""
     attrs = meta.boundary.to_attrs()
     return {
         **{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in attrs.items()},
         "diameter": meta.diameter,
         "frame_interval": meta.frame_interval,
+        "body_force_amplitude": meta.body_force_amplitude,
     }
 
 
@@ -103,6 +104,15 @@ def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], lis
                 f"{data[key]:.6g} (relative tolerance {SCENE_RTOL:g}): it predicts one frame "
                 "of that scene per step",
             )
+    if "body_force_amplitude" in scene and not _close(
+        float(scene["body_force_amplitude"]), float(data["body_force_amplitude"]), SCENE_RTOL
+    ):
+        raise fail(
+            "body_force_amplitude",
+            f"the model was trained with the body force a = {scene['body_force_amplitude']:.6g} "
+            f"m/s^2 (a_z = a cos(2 pi x / lx)), the data has {data['body_force_amplitude']:.6g}: "
+            "another drive, another flow",
+        )
     sheared = data["boundary"] == "lees_edwards"
     if sheared:
         trained = float(scene["le_sign"]) * float(scene["shear_rate"])

@@ -22,12 +22,12 @@ from pathlib import Path
 from typing import Any
 
 import lightning as L
-import numpy as np
 import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
+from gripdem.checkpoint import data_scene
 from gripdem.config_schema import check_combination
 from gripdem.console import lightning_info_muted, quiet_console
 from gripdem.data.cache import ensure_scene_dataset
@@ -85,16 +85,8 @@ def fit_linear_ar(cfg: DictConfig, dm: TrajectoryDataModule) -> LinearAR:
 def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
     meta = dm.meta
     model_cfg = plain(cfg.model)
-    scene = {
-        **{
-            k: (v.tolist() if isinstance(v, np.ndarray) else v)
-            for k, v in meta.boundary.to_attrs().items()
-        },
-        "diameter": meta.diameter,
-        "frame_interval": meta.frame_interval,
-    }
     return TrajectoryModule(
-        scene=scene,
+        scene=data_scene(meta),
         normalizer=dm.normalizer.to_dict(),
         encoding=model_cfg["encoding"],
         horizon=dm.split.horizon,

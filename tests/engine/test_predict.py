@@ -94,6 +94,14 @@ def test_incompatible_scenes_are_refused_with_the_field(
     assert "opposite flow directions: mirror the data's z axis" in err
 
 
+def test_another_body_force_is_refused(tmp_path, capsys, pbc_file, pbc_checkpoint):
+    drive = read_dataset(pbc_file).body_force_amplitude
+    other = _variant(pbc_file, tmp_path, "a", body_force_amplitude=2.0 * drive + 1.0)
+    assert run(pbc_checkpoint, other, tmp_path / "a_pred.h5") == 1
+    err = capsys.readouterr().err
+    assert "field 'body_force_amplitude'" in err and "another drive" in err
+
+
 def test_box_rules_and_the_dense_graph_particle_count(
     tmp_path, le_file, le_checkpoint, make_checkpoint
 ):

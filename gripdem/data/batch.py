@@ -36,8 +36,8 @@ class WindowBatch:
       minimum-image ``r_j - r_i`` and ``edge_distance (E,)`` in particle diameters,
       ``edge_gap (E,)`` surface gap ``distance - 1`` in diameters (from float64; -1 on self
       pairs), ``edge_ptr (B+1,)`` first edge of each sample.
-    - ``crossing_mask (B, N)`` bool: crossed an x face (the LE faces in a sheared box) in one of
-      the f target steps.
+    - ``crossing_mask (B, N)`` bool: crossed an LE face (an x face of a sheared box) in one of
+      the f target steps; all False in a periodic box.
     - ``sim_index (B,)``, ``window_start (B,)``: simulation index and first frame of each window.
     - ``in_sample``: True under the ``paper`` protocol (train = test); report it.
     """

@@ -167,6 +167,10 @@ def test_periodic_file_and_clear_errors(pbc_path, le_path):
     dm = _module(pbc_path, encoding="vct", protocol="sims", expect_boundary="periodic")
     batch = next(iter(dm.train_dataloader()))
     assert (batch.offsets == 0).all()
+    # the walk crosses the x faces often, but no face is special in a periodic box: the LE
+    # crossing mask is skipped
+    assert x_face_crossings(batch.target_positions, dm.meta.box).any()
+    assert not batch.crossing_mask.any()
     assert dm.normalizer.std[6:] == dm.normalizer.std[4:6] and dm.normalizer.mean[6:] == (0, 0)
     with pytest.raises(DatasetError, match="lees_edwards"):
         _module(pbc_path, expect_boundary="lees_edwards")

@@ -34,6 +34,10 @@ class Simulation:
     neighbours sit close in memory (the flow is along z: x-y slabs stay together); every
     public method takes and returns the caller's order. ``pairs`` and the backend arrays are
     in the internal order.
+
+    ``step`` starts the step count elsewhere than 0: a restart from a written frame at
+    absolute time t passes ``round(t / dt)`` so that the LE offset is that frame's (its
+    positions were wrapped with it).
     """
 
     def __init__(
@@ -45,6 +49,7 @@ class Simulation:
         radius: float | np.ndarray | None = None,
         backend: str | None = None,
         device: str = "cpu",
+        step: int = 0,
     ):
         self.config = config
         self.boundary = config.boundary
@@ -60,7 +65,7 @@ class Simulation:
         self.mass = config.scene.density * 4.0 / 3.0 * np.pi * self.radius**3
         self.inertia = SOLID_SPHERE_INERTIA * self.mass * self.radius**2
         self.cutoff = 2.0 * self.radius.max() + config.interaction_gap + self.skin
-        self.step = 0
+        self.step = int(step)
         self.max_overlap = 0.0  # largest overlap / (r_i + r_j) seen in any step
         self.rebuilds = 0
         pos = np.array(positions, dtype=np.float64)[self.order]

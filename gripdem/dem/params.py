@@ -50,6 +50,15 @@ LAW_SIZE = 17
 SOLID_SPHERE_INERTIA = 0.4
 TANGENTIAL_MASS_FACTOR = 2.0 / 7.0
 
+#: fewest DEM steps per contact time accepted. The explicit spring-dashpot step diverges near
+#: 2-3 steps per contact (measured on the tiny LE scene: 3 stays at the 30-step overlaps, 2
+#: lets particles pass through each other at 1000x the flow speed without any NaN, so the
+#: engine could not notice); 10 keeps a 4x margin and resolves a collision (SPEC §9: ~30).
+MIN_STEPS_PER_CONTACT = 10.0
+#: the DEM step must stay below this fraction of every damping time m / c (Stokes drag and
+#: regularised lubrication): explicit damping diverges at dt = 2 m / c, a 4x margin.
+MAX_STEP_PER_DAMPING_TIME = 0.5
+
 
 def damping_ratio(restitution: float) -> float:
     """Damping ratio zeta of a linear spring-dashpot whose head-on restitution coefficient
@@ -174,13 +183,20 @@ def _dataclass_from_mapping(cls, values: Mapping[str, Any], group: str):
 
 @dataclass(frozen=True)
 class GeneratorConfig:
-    """Everything that determines a generated dataset (hashed by the cache)."""
+    """Everything that determines a generated dataset (hashed by the cache).
+
+    A DEM step too large for the contact stiffness or for the damping terms is refused at
+    construction (:meth:`check_time_step`), naming the options that set it.
+    """
 
     scene: SceneParams
     preset: PresetParams
     sims: int
     seed: int
     backend: str = "numba"
+
+    def __post_init__(self) -> None:
+        self.check_time_step()
 
     @classmethod
     def from_mappings(
@@ -265,6 +281,45 @@ class GeneratorConfig:
     def dt(self) -> float:
         """DEM step: about contact_time / steps_per_contact, a whole fraction of a frame."""
         return self.preset.frame_interval / self.steps_per_frame
+
+    def damping_times(self) -> dict[str, float]:
+        """m / c of each damping term that is switched on (s), keyed by the scene option
+        that sets its coefficient: Stokes drag ``m / (3 pi mu d)``; pair lubrication at its
+        regularisation gap (its stiffest point), ``m_eff / (6 pi mu_l r_eff^2 / h_min)`` with
+        the pair's reduced mass ``m_eff = m / 2`` and reduced radius ``r_eff = d / 4``."""
+        s, out = self.scene, {}
+        if s.fluid_viscosity > 0:
+            out["scene.fluid_viscosity"] = self.relaxation_time
+        if s.lubrication_viscosity > 0:
+            r_eff = 0.25 * s.diameter
+            gap = s.lubrication_min_gap_d * s.diameter
+            coefficient = 6.0 * math.pi * s.lubrication_viscosity * r_eff**2 / gap
+            out["scene.lubrication_viscosity"] = 0.5 * self.mass / coefficient
+        return out
+
+    def check_time_step(self) -> None:
+        """Refuse a DEM step the explicit integrator cannot take (SPEC §9: dt ~ contact time
+        / 30): fewer than :data:`MIN_STEPS_PER_CONTACT` steps per contact time, or a step
+        above :data:`MAX_STEP_PER_DAMPING_TIME` of a damping time. The message names the
+        option that sets the step and the coefficient that makes it too large."""
+        dt, contact = self.dt, self.contact_time
+        if contact / dt < MIN_STEPS_PER_CONTACT * (1.0 - 1e-9):
+            raise ValueError(
+                f"DEM time step too large for the contact stiffness: dt = {dt:.3g} s is "
+                f"{contact / dt:.3g} steps per contact time ({contact:.3g} s at scene.stiffness "
+                f"= {self.scene.stiffness:g} N/m, particle mass {self.mass:.3g} kg); need at "
+                f"least {MIN_STEPS_PER_CONTACT:g} (the explicit step diverges near 2-3): raise "
+                f"preset.steps_per_contact (now {self.preset.steps_per_contact:g})"
+            )
+        for option, tau in self.damping_times().items():
+            if dt > MAX_STEP_PER_DAMPING_TIME * tau:
+                raise ValueError(
+                    f"DEM time step too large for the damping set by {option}: dt = {dt:.3g} s "
+                    f"exceeds {MAX_STEP_PER_DAMPING_TIME:g} x its damping time m / c = "
+                    f"{tau:.3g} s (explicit damping diverges at 2 m / c): raise "
+                    f"preset.steps_per_contact (now {self.preset.steps_per_contact:g}) or "
+                    f"lower {option}"
+                )
 
     @property
     def spinup_frames(self) -> int:

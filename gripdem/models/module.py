@@ -340,6 +340,19 @@ class TrajectoryModule(L.LightningModule):
         self.log("train/loss", loss, prog_bar=True, batch_size=batch.inputs.shape[0])
         return loss
 
+    def on_before_optimizer_step(self, optimizer) -> None:
+        """Stop at the step whose gradients are non-finite (an overflow with a finite loss),
+        before the optimiser writes NaN into the weights: clipping cannot repair an infinite
+        norm, and the loss would only turn NaN one step later."""
+        for name, param in self.named_parameters():
+            if param.grad is not None and not torch.isfinite(param.grad).all():
+                raise FloatingPointError(
+                    f"non-finite gradient of {name} at global step {self.global_step} (epoch "
+                    f"{self.current_epoch}); the weights were not updated and the last good "
+                    "checkpoint is kept in the run's checkpoints/ folder; lower model.lr or "
+                    "check this batch's data"
+                )
+
     def predict_baselines(self, batch) -> dict[str, torch.Tensor]:
         """Every baseline's wrapped positions ``(B, f, N, 3)`` on the batch's windows."""
         observed = batch.input_positions.double().transpose(1, 2)

@@ -1,0 +1,242 @@
+"""Surrogate speed-up: time per predicted frame, model vs the DEM solver, at 2000-32000 particles.
+
+    python experiments/bench_surrogate.py [--checkpoint pbc=RUN/checkpoints/best.ckpt
+        lebc=...] [--scenes pbc lebc] [--sizes 2000 8000 32000] [--dem-frames 2]
+        [--threads 1] [--memory-budget-gb 8] [--json out.json]
+    python experiments/bench_surrogate.py --quick      # tiny scene, 400 and 1600 particles
+
+States of more particles are the scene's default dataset tiled along y and z (2 x 2 copies
+for 8000, 4 x 4 for 32000; the same neighbourhoods, the same frame interval, a valid state
+of the larger box in both scenes), taken at a test simulation's frames. Per size, side by
+side in one process:
+
+- **DEM**: the built-in solver restarted from the tiled state (positions, velocities and the
+  absolute time, so the LE offset is right) and timed over ``--dem-frames`` frames of
+  ``steps_per_frame`` steps of ``dt`` (printed) after one untimed step;
+- **model**: one horizon predicted from the tiled observed frames through
+  :func:`gripdem.rollout.rollout` (the same window code as training: graph, encoding,
+  forward, decode; no overlap checks), per predicted frame. A chained rollout costs the same
+  per frame. Without ``--checkpoint`` the model is the default model (``model=interaction``,
+  fast preset) untrained: the same operations and time as a trained one.
+
+Peak resident memory of the model's prediction is measured; a size whose estimate (the
+smallest size's peak scaled with the particle count) exceeds ``--memory-budget-gb`` is
+skipped. The DEM runs on one thread (numba); the model on ``--threads`` (default 1: a like-
+for-like comparison on one core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+from benchlib import (
+    GIB,
+    PeakMemory,
+    fmt,
+    machine_line,
+    markdown_table,
+    mmap_large_allocations,
+    scene_dataset,
+    set_threads,
+    tile_frames,
+)
+
+from gripdem.boundary import Boundary
+from gripdem.checkpoint import data_scene
+from gripdem.data.schema import TrajectoryData, read_meta, write_dataset
+from gripdem.dem.engine import Simulation
+from gripdem.dem.params import GeneratorConfig
+from gripdem.models.module import TrajectoryModule
+from gripdem.rollout import rollout
+
+
+def default_model(scene: str, data_path: Path) -> TrajectoryModule:
+    """The default model (``python -m gripdem.run scene=...``), untrained, on ``data_path``."""
+    from hydra import compose, initialize_config_dir
+
+    from gripdem.experiment import build_datamodule, build_model
+    from gripdem.run import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=[f"scene={scene}", f"data.path={data_path}"])
+    dm = build_datamodule(cfg, data_path)
+    model = build_model(cfg, dm)
+    dm.teardown()
+    return model.eval()
+
+
+def model_in_box(model: TrajectoryModule, meta) -> TrajectoryModule:
+    """The same weights with the scene (box) of ``meta``."""
+    hp = {**dict(model.hparams), "scene": data_scene(meta)}
+    moved = TrajectoryModule(**hp)
+    moved.load_state_dict(model.state_dict())
+    return moved.eval()
+
+
+def tiled_state(data_path: Path, sim: int, first: int, frames: int, factor: int, out: Path):
+    """Frames ``first .. first+frames`` of ``sim`` tiled ``factor`` times, written as a gripdem
+    file (for its meta) -> (meta, positions (1, frames, n, 3), times (1, frames), last
+    velocities (n, 3), generator parameters)."""
+    with h5py.File(data_path, "r") as h5:
+        pos = np.asarray(h5["positions"][sim, first : first + frames], np.float64)
+        vel = np.asarray(h5["velocities"][sim, first + frames - 1], np.float64)
+        times = np.asarray(h5["times"][sim, first : first + frames], np.float64)
+    meta0 = read_meta(data_path)
+    tiled, box = tile_frames(pos, meta0.box, factor)
+    vel_tiled = np.concatenate([vel] * factor, axis=0)  # same copy order as tile_frames
+    boundary = Boundary(box, meta0.boundary.lees_edwards)
+    data = TrajectoryData(
+        tiled[None],
+        times[None],
+        boundary,
+        meta0.radius,
+        body_force_amplitude=meta0.body_force_amplitude,
+        provenance={"generator": "bench_surrogate tiling", "factor": factor},
+    )
+    path = write_dataset(out / f"tiled_{factor}.h5", data, overwrite=True)
+    return read_meta(path), tiled[None], times[None], vel_tiled, meta0.provenance["parameters"]
+
+
+def dem_per_frame(params: dict, meta, positions, velocities, t: float, frames: int) -> dict:
+    """DEM seconds per frame from the tiled state (after one untimed step)."""
+    aspect = np.asarray(params["preset"]["box_aspect"], float) * np.array(
+        [1.0, meta.box.ly / meta.box.lx, meta.box.lz / meta.box.lx]
+    )
+    preset = {**params["preset"], "particles": meta.n_particles, "box_aspect": aspect.tolist()}
+    config = GeneratorConfig.from_mappings(params["scene"], preset, sims=1)
+    if np.abs(config.box.lengths - meta.box.lengths).max() > 1e-9 * meta.box.lx:
+        raise RuntimeError(f"tiled box {meta.box} differs from the generator's {config.box}")
+    sim = Simulation(config, positions, velocities, step=round(t / config.dt))
+    sim.run(1)
+    start = time.perf_counter()
+    for _ in range(frames):
+        sim.run(config.steps_per_frame)
+    wall = time.perf_counter() - start
+    return {
+        "s_per_frame": wall / frames,
+        "frames": frames,
+        "dt": config.dt,
+        "steps_per_frame": config.steps_per_frame,
+        "frame_interval": config.preset.frame_interval,
+        "pairs": len(sim.pairs),
+        "max_overlap_d": sim.max_overlap,
+    }
+
+
+def model_per_frame(model, meta, observed, times, warm_up: bool) -> dict:
+    """One horizon from the observed frames: s per predicted frame and peak bytes (after an
+    untimed run when ``warm_up``: the first forward pass initialises lazily)."""
+    k, f = int(model.hparams.history_len), int(model.hparams.horizon)
+    obs, obs_t = observed[:, -(k + 1) :], times[:, -(k + 1) :]
+    if warm_up:
+        rollout(model, meta, obs, obs_t, 1, check_overlap=False)
+    with PeakMemory() as mem:
+        start = time.perf_counter()
+        run = rollout(model, meta, obs, obs_t, f, check_overlap=False)
+        wall = time.perf_counter() - start
+    if run.divergence.stopped:
+        raise RuntimeError(f"model rollout stopped: {run.divergence.stopped}")
+    return {"s_per_frame": wall / f, "horizon": f, "history_len": k, "peak_bytes": mem.peak}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--checkpoint", nargs="*", default=[], help="SCENE=PATH per scene")
+    ap.add_argument("--scenes", nargs="+", default=["pbc", "lebc"])
+    ap.add_argument("--sizes", type=int, nargs="+", default=None)
+    ap.add_argument("--dem-frames", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--memory-budget-gb", type=float, default=8.0)
+    ap.add_argument("--quick", action="store_true", help="tiny scene, 400 and 1600 particles")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    set_threads(args.threads)
+    mmap_large_allocations()
+    preset = "tiny" if args.quick else "default"
+    dem_frames = 1 if args.quick else args.dem_frames
+    checkpoints = dict(item.split("=", 1) for item in args.checkpoint)
+    work = Path(tempfile.mkdtemp(prefix="gripdem-surrogate-"))
+    report = {"quick": args.quick, "scenes": []}
+    tables = []
+    for scene in args.scenes:
+        data_path = scene_dataset(scene, preset)
+        meta0 = read_meta(data_path)
+        n0 = meta0.n_particles
+        sizes = args.sizes or ([n0, 4 * n0] if args.quick else [2000, 8000, 32000])
+        if scene in checkpoints:
+            model = TrajectoryModule.load_from_checkpoint(checkpoints[scene], map_location="cpu")
+            label = f"checkpoint {checkpoints[scene]}"
+        else:
+            model = default_model(scene, data_path)
+            label = "default model (interaction, fast preset), untrained"
+        k, f = int(model.hparams.history_len), int(model.hparams.horizon)
+        sim = meta0.n_sims - 1  # the test simulation of the default protocol
+        first = meta0.n_frames - (k + 1)
+        rows, per_particle = [], None
+        for n in sizes:
+            if n % n0:
+                raise ValueError(f"--sizes: {n} is not a multiple of the data's {n0} particles")
+            estimate = None if per_particle is None else per_particle * n
+            if estimate is not None and estimate > args.memory_budget_gb * GIB:
+                rows.append([n, "skipped", f"estimate {estimate / GIB:.1f} GiB > budget"])
+                continue
+            meta, observed, times, vel, params = tiled_state(
+                data_path, sim, first, k + 1, n // n0, work
+            )
+            moved = model_in_box(model, meta)
+            m = model_per_frame(moved, meta, observed, times, warm_up=not rows)
+            d = dem_per_frame(params, meta, observed[0, -1], vel, float(times[0, -1]), dem_frames)
+            per_particle = max(per_particle or 0.0, m["peak_bytes"] / n)
+            result = {"particles": n, "box": meta.box.lengths.tolist(), "model": m, "dem": d}
+            report.setdefault("rows", []).append({"scene": scene, **result})
+            rows.append(
+                [
+                    n,
+                    " x ".join(f"{x / meta.diameter:.1f}" for x in meta.box.lengths),
+                    fmt(1e3 * d["s_per_frame"]),
+                    fmt(1e3 * m["s_per_frame"]),
+                    fmt(d["s_per_frame"] / m["s_per_frame"]),
+                    fmt(m["peak_bytes"] / 2**20),
+                    d["pairs"],
+                ]
+            )
+            print(f"{scene} {n}: {result}", flush=True)
+        text = (
+            f"### {scene}: {label}, history {k}, horizon {f}"
+            f"{' (QUICK: tiny scene)' if args.quick else ''}\n\n"
+            f"DEM: dt = {d['dt']:.3g} s, {d['steps_per_frame']} steps per frame of "
+            f"{d['frame_interval']:.3g} s, timed over {dem_frames} frame(s) per size; model: "
+            f"one horizon of {f} frames per size.\n\n"
+            + markdown_table(
+                [
+                    "particles",
+                    "box (d)",
+                    "DEM ms / frame",
+                    "model ms / frame",
+                    "speed-up",
+                    "model peak MiB",
+                    "DEM pairs",
+                ],
+                rows,
+            )
+        )
+        tables.append(text)
+        report["scenes"].append({"scene": scene, "model": label, "table": text})
+    header = machine_line()
+    print("\n" + header + "\n")
+    print("\n\n".join(tables))
+    report["machine"] = header
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2, default=str))
+    return report
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,228 @@
+"""Shared helpers of the benchmark and stress scripts in ``experiments/`` (not a benchmark).
+
+- :func:`machine_line`: the machine, CPUs, threads, torch/numba versions and load average that
+  every script prints beside its tables (timings on a shared machine mean little without it);
+- :func:`set_threads`: torch intra-op threads (numba kernels of the DEM run on one thread);
+- :func:`markdown_table`;
+- :class:`PeakMemory`: peak resident memory of a block of code above its starting level,
+  sampled from ``/proc/self/statm`` in a thread (torch's CPU allocator has no statistics);
+- :func:`scene_dataset`: the built-in dataset of a scene and preset (from the cache; generated
+  there if missing, as ``python -m gripdem.run`` would).
+
+Scripts import it as a sibling module (``python experiments/<name>.py`` puts ``experiments/``
+first on ``sys.path``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import platform
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+GIB = 2**30
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def available_cpus() -> int:
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def memory_gib() -> tuple[float, float]:
+    """(total, available) RAM in GiB from /proc/meminfo (nan where unknown)."""
+    values = {}
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            key, rest = line.split(":", 1)
+            values[key] = float(rest.split()[0]) * 1024 / GIB
+    except (OSError, ValueError):
+        return float("nan"), float("nan")
+    return values.get("MemTotal", float("nan")), values.get("MemAvailable", float("nan"))
+
+
+def machine_line() -> str:
+    """One line: CPU, CPUs available, RAM, GPU, torch (threads), numba, load average."""
+    import numba
+
+    total, avail = memory_gib()
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return (
+        f"machine: {cpu_model()}, {available_cpus()} CPUs, RAM {total:.0f} GiB "
+        f"({avail:.0f} available), {gpu}; torch {torch.__version__} with "
+        f"{torch.get_num_threads()} thread(s), numba {numba.__version__} (DEM kernels: 1 "
+        f"thread); load average {load}"
+    )
+
+
+def set_threads(threads: int) -> None:
+    torch.set_num_threads(int(threads))
+
+
+def markdown_table(headers: list[str], rows: list[list]) -> str:
+    out = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(out)
+
+
+def fmt(value: float, digits: int = 3) -> str:
+    """A number for a table: ``digits`` significant digits, '–' for None/nan."""
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "–"
+    return f"{value:.{digits}g}"
+
+
+# --------------------------------------------------------------------------------------------
+# peak memory
+# --------------------------------------------------------------------------------------------
+_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+def rss_bytes() -> int:
+    try:
+        return int(Path("/proc/self/statm").read_text().split()[1]) * _PAGE
+    except OSError:
+        return 0
+
+
+def _glibc():
+    try:
+        return ctypes.CDLL("libc.so.6")
+    except OSError:
+        return None
+
+
+def release_freed_memory() -> None:
+    """Hand freed heap memory back to the OS (glibc), so the next RSS baseline is honest."""
+    libc = _glibc()
+    if libc is not None:
+        libc.malloc_trim(0)
+
+
+def mmap_large_allocations(threshold: int = 1 << 20) -> None:
+    """Serve allocations of ``threshold`` bytes and more by mmap (glibc ``M_MMAP_THRESHOLD``),
+    so freed tensors leave the resident set at once and each measurement starts clean."""
+    libc = _glibc()
+    if libc is not None:
+        libc.mallopt(-3, int(threshold))  # M_MMAP_THRESHOLD (also stops its dynamic growth)
+
+
+class PeakMemory:
+    """``with PeakMemory() as m: ...`` -> ``m.peak`` bytes of resident memory above the level
+    at entry, sampled every ``interval`` s (torch releases the GIL inside its kernels)."""
+
+    def __init__(self, interval: float = 0.002):
+        self.interval = interval
+        self.peak = 0
+        self._stop = threading.Event()
+
+    def _sample(self) -> None:
+        while not self._stop.is_set():
+            self._max = max(self._max, rss_bytes())
+            time.sleep(self.interval)
+
+    def __enter__(self) -> PeakMemory:
+        release_freed_memory()
+        self._start = rss_bytes()
+        self._max = self._start
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._max = max(self._max, rss_bytes())
+        self._stop.set()
+        self._thread.join()
+        self.peak = self._max - self._start
+
+
+# --------------------------------------------------------------------------------------------
+# data and configs
+# --------------------------------------------------------------------------------------------
+def load_yaml(group: str, name: str) -> dict:
+    return yaml.safe_load((CONF / group / f"{name}.yaml").read_text())
+
+
+def scene_dataset(scene: str, preset: str) -> Path:
+    """The built-in dataset of ``scene`` (pbc | lebc) and ``preset`` (tiny | default | paper)."""
+    from gripdem.data.cache import ensure_scene_dataset
+
+    return ensure_scene_dataset(load_yaml("scene", scene), load_yaml("preset", preset))
+
+
+def tiling(factor: int) -> tuple[int, int]:
+    """``(my, mz)`` with ``my * mz = factor`` and ``mz / my`` in {1, 2}: copies of a box along
+    y and z (never x: the LE images slide along x, copies along y and z are consistent in
+    both scenes, and the periodic drive depends on x only)."""
+    if factor < 1 or factor & (factor - 1):
+        raise ValueError(f"particle counts must be the data's times a power of 2, got x{factor}")
+    my = 1 << (factor.bit_length() - 1) // 2
+    return my, factor // my
+
+
+def tile_frames(positions: np.ndarray, box, factor: int):
+    """Frames ``(..., N, 3)`` of ``box`` tiled ``factor`` times along y and z: ``(positions
+    (..., factor * N, 3), Box)``; the same state repeated, a valid configuration of the
+    larger box (same volume fraction, same neighbourhoods)."""
+    from gripdem.boundary import Box, wrap_positions
+
+    my, mz = tiling(factor)
+    big = Box(box.lx, my * box.ly, mz * box.lz)
+    copies = []
+    for j in range(my):
+        for k in range(mz):
+            shift = np.array([0.0, (j - (my - 1) / 2) * box.ly, (k - (mz - 1) / 2) * box.lz])
+            copies.append(positions + shift)
+    return wrap_positions(np.concatenate(copies, axis=-2), big), big
+
+
+def train_run(run: Path, overrides: list[str]) -> Path:
+    """Train and test ``python -m gripdem.run <overrides>`` in this process into ``run`` (no
+    figures or XYZ files), with its config saved as a run directory's ``.hydra/`` would be."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from gripdem.experiment import run_experiment
+    from gripdem.run import CONFIG_DIR
+
+    overrides = [
+        *overrides,
+        f"logger.save_dir={run}",
+        "outputs.figures=false",
+        "outputs.export_xyz=false",
+    ]
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=overrides)
+    run_experiment(cfg, run)
+    (run / ".hydra").mkdir(parents=True, exist_ok=True)
+    OmegaConf.save(cfg, run / ".hydra" / "config.yaml")
+    OmegaConf.save(OmegaConf.create(overrides), run / ".hydra" / "overrides.yaml")
+    return run
+
+
+def best_of(fn, repeats: int) -> float:
+    """Smallest wall time of ``repeats`` calls (s): the least disturbed by other jobs."""
+    times = []
+    for _ in range(max(1, repeats)):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)

@@ -10,7 +10,11 @@ seeded noise, so the network's output is far from zero and every layer matters.
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -476,3 +480,26 @@ def test_exploding_weights_stop_with_the_step_named(tiny_pbc_path, model_name):
     model, dm = smoke_model(tiny_pbc_path, f"model={model_name}", "model.lr=1e30")
     with pytest.raises(FloatingPointError, match=r"at global step [1-5] "):
         fit(model.train(), dm)
+
+
+# --------------------------------------------------------------------------------------------
+# the slow cases: experiments/stress.py --quick
+# --------------------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_stress_script_quick(tmp_path, gripdem_data_root, tiny_pbc_path, tiny_lebc_path):
+    """Long chained rollouts of trained smoke models, bf16 and SI-vs-unit with trained
+    models: the script's quick mode runs (on the session's tiny datasets) and every case
+    holds."""
+    out = tmp_path / "stress.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "experiments" / "stress.py"), "--quick", "--json", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=900,
+        env={**os.environ, "GRIPDEM_DATA": str(gripdem_data_root)},
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "machine:" in proc.stdout and "torch" in proc.stdout
+    report = json.loads(out.read_text())
+    assert report["cases"] and all(case["held"] for case in report["cases"]), report["cases"]

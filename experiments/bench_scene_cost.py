@@ -214,7 +214,7 @@ def window_parts(model, meta, path: Path, n_windows: int) -> dict:
                     length_unit=meta.diameter,
                 )
             ),
-            "LE crossing mask": each(
+            "LE crossing mask (periodic: skipped; its cost if not)": each(
                 lambda i: x_face_crossings(frames[i][:, HISTORY:], meta.box, offs[i][HISTORY:])
             ),
             "whole sample (read, encode, normalise, graph, mask)": each(

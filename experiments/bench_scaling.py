@@ -17,11 +17,12 @@ the fast preset's widths (untrained: the same operations and time as trained):
 States are the scene's default dataset tiled along y and z (2000 x 2^m particles, the same
 neighbourhoods), windows built by the training code (:class:`WindowDataset`). Per case:
 inference (forward + decode, no gradients) and one training step (forward, loss, backward,
-Adam step), best of ``--repeats`` (the first run warms up), and the peak resident memory of
-each above its starting level, sampled in one more run (the sampling thread would slow the
-timed ones). Three sweeps keep the count of cases sane: particle count
-(history 10, first thread count), history length (smallest size) and threads (the size 4x
-the smallest, history 10).
+Adam step), best of ``--repeats`` (the first run warms up), and its memory: the weights
+(with gradients and Adam's two moments for a training step), counted, plus the peak resident
+memory of the step above the level before it (activations and temporaries), sampled in one
+more run (the sampling thread would slow the timed ones). Three sweeps keep the count of
+cases sane: particle count (history 10, first thread count), history length (smallest
+size) and threads (the size 4x the smallest, history 10).
 
 Memory is estimated before every case (from the previous size of the same case scaled by n,
 or n^2 for ``dense``, else from a formula) and a case over ``--memory-budget-gb`` is skipped;
@@ -165,7 +166,8 @@ def formula_bytes(op: str, n: int, k: int, train: bool, neighbours: float) -> fl
 
 
 def run_case(model, batch, train: bool, repeats: int) -> tuple[float, int]:
-    """(best seconds, peak bytes) of inference or one training step."""
+    """(best seconds, peak bytes above the level before the step, bytes of the weights with
+    their gradients and Adam moments when training) of inference or one training step."""
     if train:
         model.train()
         opt = torch.optim.Adam(model.parameters(), lr=1e-4)
@@ -190,7 +192,8 @@ def run_case(model, batch, train: bool, repeats: int) -> tuple[float, int]:
         best = min(best, time.perf_counter() - start)
     with PeakMemory() as mem:  # a run of its own: the sampling thread slows small ops down
         step()
-    return best, mem.peak
+    weights = sum(p.numel() * p.element_size() for p in model.parameters())
+    return best, mem.peak, weights * (4 if train else 1)
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -238,7 +241,7 @@ def main(argv: list[str] | None = None) -> dict:
                 est_mem = (
                     formula_bytes(op, n, k, train, neighbours)
                     if last is None
-                    else max(last["peak"], 1.0) * scale
+                    else max(last["bytes"], 1.0) * scale
                 )
                 est_s = None if last is None else last["seconds"] * scale
                 row = {
@@ -256,11 +259,14 @@ def main(argv: list[str] | None = None) -> dict:
                 else:
                     batch, meta = tiled_batch(data_path, n // n0, k + 1 + f, base, work)
                     model = sized_model(base, meta, n)
-                    seconds, peak = run_case(model, batch, train, args.repeats)
+                    seconds, peak, state = run_case(model, batch, train, args.repeats)
                     row.update(
-                        seconds=seconds, peak_bytes=peak, edges=int(batch.edge_index.shape[1])
+                        seconds=seconds,
+                        peak_bytes=peak,
+                        state_bytes=state,
+                        edges=int(batch.edge_index.shape[1]),
                     )
-                    previous[key] = {"n": n, "peak": peak, "seconds": seconds}
+                    previous[key] = {"n": n, "bytes": peak + state, "seconds": seconds}
                     del model, batch
                     release_freed_memory()
                 results.append(row)
@@ -276,6 +282,7 @@ def main(argv: list[str] | None = None) -> dict:
                 r["threads"],
                 r["mode"],
                 r.get("skipped") or fmt(r["seconds"]),
+                "–" if "skipped" in r else fmt(r["state_bytes"] / 2**20),
                 "–" if "skipped" in r else fmt(r["peak_bytes"] / 2**20),
                 fmt(r["estimate_bytes"] / 2**20),
                 r.get("edges", "–"),
@@ -289,7 +296,8 @@ def main(argv: list[str] | None = None) -> dict:
             "threads",
             "case",
             "seconds",
-            "peak MiB",
+            "weights (+grads, Adam) MiB",
+            "step peak MiB",
             "estimate MiB",
             "edges",
         ],

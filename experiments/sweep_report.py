@@ -64,16 +64,23 @@ def _split_key(split: str) -> tuple:
     return (SPLIT_ORDER.index(split), split) if split in SPLIT_ORDER else (99, split)
 
 
+MODEL_ORDER = ("interaction", "grip", "pct", "vct")
+
+
+def _model_key(model: str) -> tuple:
+    return (MODEL_ORDER.index(model), "") if model in MODEL_ORDER else (len(MODEL_ORDER), model)
+
+
 def _models(groups) -> list[str]:
-    order = ["interaction", "grip", "pct", "vct"]
-    found = sorted({k[2] for k in groups}, key=lambda m: (order.index(m) if m in order else 9, m))
-    return found
+    return sorted({k[2] for k in groups}, key=_model_key)
 
 
 def results_markdown(groups) -> str:
     lines = []
     for scene in sorted({k[0] for k in groups}):
-        keys = sorted((k for k in groups if k[0] == scene), key=lambda k: (_split_key(k[1]), k[2]))
+        keys = sorted(
+            (k for k in groups if k[0] == scene), key=lambda k: (_split_key(k[1]), _model_key(k[2]))
+        )
         le = any("test/n_crossers" in m for k in keys for m in groups[k])
         lines += [f"### {scene}", ""]
         header = [

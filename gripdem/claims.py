@@ -100,9 +100,14 @@ def beats(groups: Groups, scene: str, split: str, a: str, b: str, key: str, what
     verdict, margin = decide(mean_b - mean_a, var_a + var_b, min(n_a, n_b))
     evidence = (
         f"{a} {mean_a:.4g} (n={n_a}) vs {b} {mean_b:.4g} (n={n_b}); "
-        f"{b} - {a} = {mean_b - mean_a:+.3g} = {margin:+.1f} se"
+        f"{b} - {a} = {mean_b - mean_a:+.3g} = {_in_se(margin)}"
     )
     return Comparison(f"{scene} {split}: {a} beats {b} ({what})", verdict, evidence)
+
+
+def _in_se(margin: float) -> str:
+    """A margin in standard errors, or why there is none."""
+    return "no seed spread (fewer than 2 seeds)" if math.isnan(margin) else f"{margin:+.1f} se"
 
 
 def gap_grows(groups: Groups, scene: str, splits: list[str], grip: str, pct: str) -> Comparison:
@@ -119,7 +124,7 @@ def gap_grows(groups: Groups, scene: str, splits: list[str], grip: str, pct: str
     verdict, margin = decide(long - short, var_s + var_l, min(n_s, n_l))
     evidence = (
         f"gap (GRIP - PCT) / GRIP: {short:+.3%} at {splits[0]}, {long:+.3%} at {splits[-1]}; "
-        f"growth {long - short:+.3%} = {margin:+.1f} se"
+        f"growth {long - short:+.3%} = {_in_se(margin)}"
     )
     return Comparison(f"{scene}: the PCT-GRIP gap grows with the horizon", verdict, evidence)
 

@@ -189,3 +189,80 @@ def physics_report(p: Predictions, profile_kind: str | None = None) -> PhysicsRe
             m[f"crossers/{name}/ci_low_over_d"] = low / d
             m[f"crossers/{name}/ci_high_over_d"] = high / d
     return report
+
+
+# --------------------------------------------------------------------------------------------
+# command line: the report of any predictions.h5 (a run's, or gripdem.predict's)
+# --------------------------------------------------------------------------------------------
+#: the table's columns: metric key suffix, heading
+TABLE_COLUMNS = (
+    ("profile_error_over_d", "profile RMS diff / d"),
+    ("gr_distance", "g(r) distance"),
+    ("coordination_contact", "contacts Z"),
+    ("msd_last_over_d2", "MSD / d²"),
+    ("non_affine_rms_over_d", "non-affine RMS / d"),
+    ("overlap_fraction", "overlap"),
+)
+
+
+def report_table(report: PhysicsReport) -> str:
+    """Markdown table: one row per trajectory set (truth first), the scalars against the truth,
+    and for LE data the crossers' RMSE with its bootstrap interval."""
+    m = report.metrics
+    head = "| set | " + " | ".join(h for _, h in TABLE_COLUMNS) + " |"
+    lines = [head, "|" + "---|" * (len(TABLE_COLUMNS) + 1)]
+    for name in report.sets:
+        cells = []
+        for key, _ in TABLE_COLUMNS:
+            value = m.get(f"{name}/{key}")
+            cells.append("–" if value is None else f"{value:.4g}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if "crossers/n" in m:
+        n = m["crossers/n"]
+        lines += ["", f"LE crossers (n = {n:.0f} particle-windows): RMSE / d [95 % CI]"]
+        for name in report.sets[1:]:
+            lines.append(
+                f"- {name}: {m[f'crossers/{name}/rmse_over_d']:.4g} "
+                f"[{m[f'crossers/{name}/ci_low_over_d']:.4g}, "
+                f"{m[f'crossers/{name}/ci_high_over_d']:.4g}]"
+            )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m gripdem.physics_report PREDICTIONS.h5 [--figure PNG] [--json JSON]``."""
+    import argparse
+    import json
+
+    from gripdem.data.h5io import atomic_path
+    from gripdem.predictions import read_predictions
+
+    parser = argparse.ArgumentParser(
+        prog="python -m gripdem.physics_report",
+        description="The physics report of a predictions.h5 (truth, model and baselines side "
+        "by side): a Markdown table on stdout, optionally the figure and the scalars as JSON.",
+    )
+    parser.add_argument("predictions", help="a predictions.h5 (gripdem.run or gripdem.predict)")
+    parser.add_argument("--figure", help="write the 2 x 2 physics figure here (PNG)")
+    parser.add_argument("--json", help="write the scalars here")
+    args = parser.parse_args(argv)
+    p = read_predictions(args.predictions)
+    report = physics_report(p)
+    print(f"physics report: {p.title()}, {p.n_windows} windows x {p.horizon} steps")
+    print(report_table(report))
+    if args.figure:
+        from gripdem.plots import save_figure
+        from gripdem.plots_physics import plot_physics
+
+        save_figure(plot_physics(report, p.title(), str(p.info.get("model", "model"))), args.figure)
+        print(f"figure: {args.figure}")
+    if args.json:
+        with atomic_path(args.json, overwrite=True) as tmp:
+            with open(tmp, "w") as fh:
+                json.dump(report.metrics, fh, indent=1, sort_keys=True)
+        print(f"scalars: {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

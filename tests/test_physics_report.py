@@ -129,3 +129,24 @@ def test_bootstrap_interval_brackets_the_rmse():
     _, low_4, high_4 = bootstrap_rmse(np.tile(squared, 4))
     assert (high_4 - low_4) == pytest.approx((high - low) / 2, rel=0.25)
     assert all(math.isnan(v) for v in bootstrap_rmse(np.array([])))
+
+
+def test_command_line_reports_a_predictions_file(tmp_path, capsys):
+    """``python -m gripdem.physics_report``: the table names every set, the JSON holds the same
+    scalars as the report, the figure is written."""
+    import json
+
+    from gripdem.physics_report import main
+    from gripdem.predictions import write_predictions
+
+    p, _ = affine_predictions(le=True, drift=0.02)
+    path = write_predictions(tmp_path / "predictions.h5", p)
+    figure, scalars = tmp_path / "physics.png", tmp_path / "physics.json"
+    assert main([str(path), "--figure", str(figure), "--json", str(scalars)]) == 0
+    out = capsys.readouterr().out
+    for name in ("truth", "model", "echo", "stay"):
+        assert f"| {name} |" in out
+    assert "LE crossers (n = " in out
+    assert figure.stat().st_size > 10_000
+    expected = physics_report(p).metrics
+    assert json.loads(scalars.read_text()) == pytest.approx(expected)

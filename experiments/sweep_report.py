@@ -31,6 +31,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from gripdem.data.h5io import atomic_path
+from gripdem.plots import save_figure
 from gripdem.summary import runs_by_group
 
 SPLIT_ORDER = ("190-10", "180-20", "150-50", "100-100")
@@ -189,7 +191,7 @@ def plot_time_to_accuracy(groups) -> Figure | None:
     ax = fig.add_subplot()
     drawn = False
     colours = {}
-    for (scene, split, model), runs in sorted(groups.items()):
+    for (scene, split, model), runs in sorted(groups.items(), key=lambda kv: _model_key(kv[0][2])):
         if split != min((k[1] for k in groups if k[0] == scene), key=_split_key):
             continue
         for run in runs:
@@ -198,11 +200,12 @@ def plot_time_to_accuracy(groups) -> Figure | None:
                 continue
             points = np.array(json.loads(curve))
             label = f"{scene} {model}"
-            colour = colours.setdefault(label, f"C{len(colours)}")
+            colour = colours.setdefault(model, f"C{len(colours)}")
             ax.plot(
                 points[:, 0],
                 points[:, 2],
-                marker="o",
+                marker="o" if scene == "pbc" else "s",
+                ls="-" if scene == "pbc" else "--",
                 ms=3,
                 color=colour,
                 label=label if label not in ax.get_legend_handles_labels()[1] else None,
@@ -233,7 +236,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     markdown = results_markdown(groups)
-    (out / "results.md").write_text(markdown)
+    with atomic_path(out / "results.md", overwrite=True) as tmp:
+        tmp.write_text(markdown)
     print(markdown)
     figures = {
         "results_rmse_by_split": plot_rmse_by_split(groups, ratio=False),
@@ -242,7 +246,7 @@ def main(argv=None) -> int:
     }
     for name, fig in figures.items():
         if fig is not None:
-            fig.savefig(out / f"{name}.png")
+            save_figure(fig, out / f"{name}.png")
             print(f"written: {out / name}.png")
     return 0
 

@@ -7,7 +7,9 @@ Reads every job's ``metrics.json`` (through :func:`gripdem.summary.collect`), gr
 
 - ``results.md``: per scene, RMSE / d and the ratio to constant velocity (CV) and to the linear
   AR baseline as mean ± std over seeds, beside CV, AR and the mean-flow profile, LE crossers
-  separately (model / CV / AR with their count), training seconds;
+  separately (model / CV / AR with their count), the model's overlap fraction at the last
+  predicted step (particles within 0.98 d of a neighbour; the truth has none), training
+  seconds;
 - ``results_rmse_by_split.png``: RMSE / d against the split for every model and baseline, both
   scenes (the paper's first figure, out of sample, with seed error bars);
 - ``results_ratio_to_cv.png``: RMSE / CV per split and model (below 1: better than CV);
@@ -77,6 +79,15 @@ def _models(groups) -> list[str]:
     return sorted({k[2] for k in groups}, key=_model_key)
 
 
+def _overlap(metrics: dict) -> float:
+    """The model's fraction of particles within 0.98 d of a neighbour at the last predicted step
+    (the truth has none): the physics report's key, or the one of runs made before it."""
+    for key in ("test/physics/model/overlap_fraction", "test/physics/overlap_fraction"):
+        if key in metrics:
+            return metrics[key]
+    return math.nan
+
+
 def results_markdown(groups) -> str:
     lines = []
     for scene in sorted({k[0] for k in groups}):
@@ -98,7 +109,7 @@ def results_markdown(groups) -> str:
         ]
         if le:
             header += ["crossers: model / CV / AR (n)"]
-        header += ["train s"]
+        header += ["overlap %", "train s"]
         lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         for key in keys:
             runs = groups[key]
@@ -115,6 +126,7 @@ def results_markdown(groups) -> str:
                 ar = _stats([m.get("test/rmse_linear_ar_crossers", math.nan) / d for m in runs])[0]
                 n = int(runs[0]["test/n_crossers"])
                 row.append(f"{model} / {cv:.3g} / {ar:.3g} ({n})")
+            row.append(_pm([100 * _overlap(m) for m in runs], 2))
             row.append(f"{_stats([m['train_seconds'] for m in runs])[0]:.0f}")
             lines.append("| " + " | ".join(row) + " |")
         lines.append("")

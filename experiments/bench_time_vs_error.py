@@ -381,10 +381,14 @@ def plot(groups: dict, path: Path, note: str = "") -> None:
     """One panel per scene and split: wall time (log) against RMSE / d (log); the DEM, whose
     error is 0, as a vertical line at its time; the Pareto front of the others joined."""
     keys = sorted(groups)
-    fig, axes = plt.subplots(1, len(keys), figsize=(5.6 * len(keys), 4.6), squeeze=False)
+    ncols = min(4, len(keys))
+    nrows = -(-len(keys) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 4.6 * nrows), squeeze=False)
+    for ax in axes.flat[len(keys) :]:
+        ax.set_visible(False)
     markers = "osD^v<>px*h"
     colors = {"stay": "C1", "constant_velocity": "C2", "mean_flow": "C4", "linear_ar": "C0"}
-    for ax, key in zip(axes[0], keys, strict=True):
+    for ax, key in zip(axes.flat, keys, strict=False):  # spare panels hidden above
         rows = [r for r in groups[key]["rows"] if r.kind != "dem"]
         dem = next(r for r in groups[key]["rows"] if r.kind == "dem")
         pts = [(r.total_s, r.rmse_over_d) for r in rows]
@@ -419,6 +423,25 @@ def plot(groups: dict, path: Path, note: str = "") -> None:
     plt.close(fig)
 
 
+def replot(path: Path) -> dict:
+    """The Pareto plot of a written ``time_vs_error.json``, next to it (nothing is re-timed)."""
+    report = json.loads(path.read_text())
+    fields = ("method", "kind", "prep_s", "predict_s", "frames", "rmse_over_d", "train_s", "data_s")
+    groups = {
+        (g["scene"], g["split"]): {
+            "info": g["info"],
+            "rows": [Row(**{k: r[k] for k in fields}) for r in g["rows"]],
+        }
+        for g in report["groups"]
+    }
+    figure = path.with_name("pareto_time_vs_error.png")
+    plot(
+        groups, figure, " (QUICK: a few test windows, DEM extrapolated)" if report["quick"] else ""
+    )
+    print(f"wrote {figure}")
+    return report
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="*", type=Path, help="run or sweep directories")
@@ -427,7 +450,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--dem-frames", type=int, default=None, help="DEM frames timed (all)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out-dir", type=Path, default=None)
+    ap.add_argument(
+        "--replot", type=Path, default=None, help="redraw the Pareto plot of a time_vs_error.json"
+    )
     args = ap.parse_args(argv)
+    if args.replot:
+        return replot(args.replot)
     set_threads(args.threads)
     if args.quick:
         args.windows = args.windows or 2

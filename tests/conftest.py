@@ -14,6 +14,9 @@ a random walk large enough to cross every face often) and each frame is wrapped 
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -103,6 +106,26 @@ def _tiny_dataset(scene: str, root: Path) -> Path:
     return ensure_scene_dataset(
         cfg.scene, cfg.preset, sims=cfg.sims, seed=cfg.seed, root=root, progress=False
     )
+
+
+@pytest.fixture(scope="session")
+def run_experiment_quick(gripdem_data_root):
+    """``run_experiment_quick(name, *args)``: ``python experiments/<name>.py --quick ARGS`` from
+    the repository root with the session's dataset cache, output captured (the callers assert
+    on it)."""
+    root = Path(__file__).resolve().parents[1]
+
+    def run(name: str, *args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, str(root / "experiments" / f"{name}.py"), "--quick", *args],
+            capture_output=True,
+            text=True,
+            cwd=root,
+            timeout=900,
+            env={**os.environ, "GRIPDEM_DATA": str(gripdem_data_root)},
+        )
+
+    return run
 
 
 @pytest.fixture(scope="session")

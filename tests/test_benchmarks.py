@@ -5,31 +5,18 @@ table, and its figures are consistent. Timings themselves are never asserted."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture
-def run_script(gripdem_data_root, tiny_pbc_path, tiny_lebc_path):
+def run_script(run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
     """``run_script(name, *args) -> stdout`` of ``python experiments/<name>.py --quick``."""
 
     def run(name: str, *args: str) -> str:
-        proc = subprocess.run(
-            [sys.executable, str(ROOT / "experiments" / f"{name}.py"), "--quick", *args],
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-            timeout=900,
-            env={**os.environ, "GRIPDEM_DATA": str(gripdem_data_root)},
-        )
+        proc = run_experiment_quick(name, *args)
         assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
         assert "machine:" in proc.stdout and "torch 2" in proc.stdout and "thread" in proc.stdout
         return proc.stdout

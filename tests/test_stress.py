@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
@@ -486,19 +483,12 @@ def test_exploding_weights_stop_with_the_step_named(tiny_pbc_path, model_name):
 # the slow cases: experiments/stress.py --quick
 # --------------------------------------------------------------------------------------------
 @pytest.mark.slow
-def test_stress_script_quick(tmp_path, gripdem_data_root, tiny_pbc_path, tiny_lebc_path):
+def test_stress_script_quick(tmp_path, run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
     """Long chained rollouts of trained smoke models, bf16 and SI-vs-unit with trained
     models: the script's quick mode runs (on the session's tiny datasets) and every case
     holds."""
     out = tmp_path / "stress.json"
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "experiments" / "stress.py"), "--quick", "--json", str(out)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=900,
-        env={**os.environ, "GRIPDEM_DATA": str(gripdem_data_root)},
-    )
+    proc = run_experiment_quick("stress", "--json", str(out))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "machine:" in proc.stdout and "torch" in proc.stdout
     report = json.loads(out.read_text())

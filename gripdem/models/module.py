@@ -344,8 +344,11 @@ class TrajectoryModule(L.LightningModule):
         """Stop at the step whose gradients are non-finite (an overflow with a finite loss),
         before the optimiser writes NaN into the weights: clipping cannot repair an infinite
         norm, and the loss would only turn NaN one step later."""
-        for name, param in self.named_parameters():
-            if param.grad is not None and not torch.isfinite(param.grad).all():
+        grads = [(name, p.grad) for name, p in self.named_parameters() if p.grad is not None]
+        if not grads or bool(torch.stack([torch.isfinite(g).all() for _, g in grads]).all()):
+            return  # one host sync per step; the parameter is named only on failure
+        for name, grad in grads:
+            if not torch.isfinite(grad).all():
                 raise FloatingPointError(
                     f"non-finite gradient of {name} at global step {self.global_step} (epoch "
                     f"{self.current_epoch}); the weights were not updated and the last good "

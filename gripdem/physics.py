@@ -1,10 +1,10 @@
 """Physics-level evaluation of predicted trajectories beside the truth (SPEC §6).
 
 Everything works on wrapped Cartesian positions with the LE-aware minimum image of
-:mod:`gripdem.boundary`. Pair searches use ``vesin`` with the triclinic Lees-Edwards cell
-``(lx, 0, delta), (0, ly, 0), (0, 0, lz)`` (O(n) cell lists, never an n x n matrix); for a cut-off
-below half the smallest box length every pair has at most one image inside the cut-off, and that
-image is the SPEC minimum image.
+:mod:`gripdem.boundary`. Pair searches use :func:`gripdem.boundary.neighbour_pairs` (O(n)
+cell lists on the triclinic Lees-Edwards cell, never an n x n matrix); for a cut-off below half
+the smallest box length every pair has at most one image inside the cut-off, and that image is
+the SPEC minimum image.
 
 Layouts (as :mod:`gripdem.metrics`): one frame ``(particles, 3)`` with a scalar offset, a stack of
 frames ``(frames, particles, 3)`` with offsets ``(frames,)``, windows of predictions
@@ -20,17 +20,15 @@ import math
 from typing import Any
 
 import numpy as np
-import vesin
 
 from gripdem.boundary import Box, displacement, unwrap_trajectory, wrap_coordinate
+from gripdem.boundary import neighbour_pairs as find_pairs
 
 Array = Any
 
 #: pairs closer than ``OVERLAP_TOLERANCE * diameter`` count as overlapping (SPEC §6): the
 #: soft-contact DEM truth has pairs slightly below d
 OVERLAP_TOLERANCE = 0.98
-#: smallest neighbour-search radius handed to vesin, as a fraction of the smallest box length
-MIN_SEARCH_FRACTION = 1e-3
 
 
 def _np(x: Array) -> np.ndarray:
@@ -56,16 +54,12 @@ def _frames(positions: Array, offsets: Array | float | None) -> tuple[np.ndarray
     return pos, off
 
 
-def le_cell(box: Box, offset: float = 0.0) -> np.ndarray:
-    """Rows are the triclinic Lees-Edwards cell vectors ``(lx,0,delta), (0,ly,0), (0,0,lz)``."""
-    return np.array([[box.lx, 0.0, float(offset)], [0.0, box.ly, 0.0], [0.0, 0.0, box.lz]])
-
-
 def neighbour_pairs(
     positions: Array, box: Box, cutoff: float, offset: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs ``i < j`` of one frame ``(particles, 3)`` whose LE-aware minimum-image distance is
-    below ``cutoff``; returns ``(i, j, distance)``, each pair once, O(n) work.
+    below ``cutoff``; returns ``(i, j, distance)``, each pair once, O(n) work
+    (:func:`gripdem.boundary.neighbour_pairs`).
 
     Requires ``cutoff < min(lx, ly, lz) / 2`` so that each pair has a single image in range.
     """
@@ -77,14 +71,9 @@ def neighbour_pairs(
     pos = _np(positions)
     if pos.ndim != 2 or pos.shape[-1] != 3:
         raise ValueError(f"positions of one frame must be (particles, 3), got {pos.shape}")
-    # vesin refuses cut-offs far below the box size (too many cells): search a little wider
-    radius = max(float(cutoff), MIN_SEARCH_FRACTION * float(box.lengths.min()))
-    search = vesin.NeighborList(cutoff=radius, full_list=False)
-    i, j, d = search.compute(pos, le_cell(box, offset), True, "ijd")
-    keep = d < cutoff
-    i, j, d = i[keep], j[keep], d[keep]
-    i, j = np.minimum(i, j).astype(np.int64), np.maximum(i, j).astype(np.int64)
-    return i, j, np.asarray(d, dtype=np.float64)
+    i, j, vec = find_pairs(pos, box, offset, cutoff)
+    distance = np.sqrt(np.einsum("pc,pc->p", vec, vec))
+    return np.minimum(i, j), np.maximum(i, j), distance
 
 
 def pair_distances(

@@ -1,9 +1,8 @@
 """The fixed interaction graph at the last observed frame (SPEC §5), as a sparse edge list.
 
 Neighbours: every pair whose LE-aware minimum-image centre distance is below the cut-off D
-(default 3 particle diameters). Found in O(n) with ``vesin`` on the triclinic lattice of the
-Lees-Edwards images, cell vectors ``(lx, 0, δ), (0, ly, 0), (0, 0, lz)`` with δ of that frame
-(a periodic box is the case δ = 0). :func:`brute_force_pairs` is the O(n²) reference.
+(default 3 particle diameters), found in O(n) by :func:`gripdem.boundary.neighbour_pairs`
+(``vesin`` on the triclinic lattice of the Lees-Edwards images) and kept in both directions.
 
 Normalisation exactly as the authors' scripts: ``A_ij = 1`` for neighbours and for ``i = j``
 (distance 0), ``Λ_ii = Σ_k A_ik + α``, ``G_fixed = I/(1+α) + Λ^-1/2 A Λ^-1/2`` (α = 0.001).
@@ -24,9 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import vesin
 
-from gripdem.boundary import Box, minimum_image
+from gripdem.boundary import Box, neighbour_pairs
 
 #: the paper's α in Λ_ii = Σ_k A_ik + α
 DEFAULT_ALPHA = 0.001
@@ -67,57 +65,6 @@ class Graph:
         return g
 
 
-def _lattice(box: Box, offset: float) -> np.ndarray:
-    """Rows are the LE lattice vectors (lx, 0, δ), (0, ly, 0), (0, 0, lz)."""
-    return np.array([[box.lx, 0.0, offset], [0.0, box.ly, 0.0], [0.0, 0.0, box.lz]])
-
-
-def neighbour_pairs(
-    positions: np.ndarray, box: Box, offset: float, cutoff: float, n_threads: int = 1
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All ordered pairs ``i != j`` with LE minimum-image distance ``< cutoff``, in O(n).
-
-    positions ``(N, 3)`` float64 wrapped; ``offset`` the frame's LE offset δ (0 if periodic).
-    Returns ``(i, j, vector)`` with int64 ``(P,)`` indices and ``(P, 3)`` float64
-    minimum-image vectors ``r_j - r_i`` (both directions of every pair).
-    """
-    positions = np.ascontiguousarray(positions, dtype=np.float64)
-    if positions.ndim != 2 or positions.shape[1] != 3:
-        raise ValueError(f"positions must have shape (N, 3), got {positions.shape}")
-    if not cutoff > 0:
-        raise ValueError(f"graph cut-off must be positive, got {cutoff!r}")
-    offset = float(offset)
-    nl = vesin.NeighborList(cutoff=float(cutoff), full_list=False, n_threads=n_threads)
-    i, j, vec = nl.compute(positions, _lattice(box, offset), True, "ijD")
-    i, j = i.astype(np.int64), j.astype(np.int64)
-    if 2 * cutoff >= min(box.lx, box.ly, box.lz):
-        # More than one image of a pair (or a particle's own image) can lie within the
-        # cut-off: keep each pair once, with the SPEC's minimum image, if that is within it.
-        keep = i != j
-        i, j = i[keep], j[keep]
-        lo, hi = np.minimum(i, j), np.maximum(i, j)
-        _, first = np.unique(lo * len(positions) + hi, return_index=True)
-        i, j = lo[first], hi[first]
-        vec = minimum_image(positions[j] - positions[i], box, offset)
-        keep = np.einsum("pc,pc->p", vec, vec) < cutoff * cutoff
-        i, j, vec = i[keep], j[keep], vec[keep]
-    # Otherwise every lattice vector is longer than 2*cutoff, so each pair has one image within
-    # the cut-off and it is the minimum image: vesin's vectors are the answer as they are.
-    return np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([vec, -vec])
-
-
-def brute_force_pairs(
-    positions: np.ndarray, box: Box, offset: float, cutoff: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """O(n²) reference for :func:`neighbour_pairs`: minimum image of every pair (numpy)."""
-    positions = np.asarray(positions, dtype=np.float64)
-    vec = minimum_image(positions[None, :, :] - positions[:, None, :], box, float(offset))
-    dist2 = np.einsum("ijc,ijc->ij", vec, vec)
-    np.fill_diagonal(dist2, np.inf)
-    i, j = np.nonzero(dist2 < cutoff * cutoff)
-    return i.astype(np.int64), j.astype(np.int64), vec[i, j]
-
-
 def fixed_graph_weights(
     i: np.ndarray, j: np.ndarray, n_nodes: int, alpha: float = DEFAULT_ALPHA
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -141,7 +88,7 @@ def build_graph(
     """The fixed graph of one frame: ``positions (N, 3)`` wrapped, ``offset`` its LE offset,
     ``cutoff`` in metres; edge vectors and distances are divided by ``length_unit``."""
     n = len(positions)
-    i, j, vec = neighbour_pairs(positions, box, offset, cutoff, n_threads)
+    i, j, vec = neighbour_pairs(positions, box, offset, cutoff, n_threads, both_directions=True)
     self_w, pair_w = fixed_graph_weights(i, j, n, alpha)
     nodes = np.arange(n, dtype=np.int64)
     vec = np.concatenate([np.zeros((n, 3)), vec]) / length_unit

@@ -41,9 +41,9 @@ from pathlib import Path
 import numpy as np
 
 from gripdem.boundary import lattice_continuous_steps, minimum_image
-from gripdem.data.lammps_dump import read_dump
-from gripdem.data.lammps_series import AxisMap
 from gripdem.data.schema import read_dataset
+from gripdem.formats.lammps_dump import read_dump
+from gripdem.formats.lammps_series import AxisMap
 
 SHEAR_RATE = 0.1
 TIMESTEP = 0.005

@@ -20,9 +20,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from gripdem.data.fordatis import DEFAULT_DIAMETER, ImportReport, read_fordatis
-from gripdem.data.lammps import read_lammps
 from gripdem.data.schema import write_dataset
+from gripdem.formats.fordatis import DEFAULT_DIAMETER, ImportReport, read_fordatis
+from gripdem.formats.lammps import read_lammps
 
 
 def _fmt(values) -> str:

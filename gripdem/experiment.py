@@ -316,7 +316,7 @@ def write_outputs(
             physics=physics_report,
         )
     if outputs["export_xyz"]:
-        from gripdem.export import export_extxyz
+        from gripdem.formats.export import export_extxyz
 
         count = outputs["export_windows"]
         n = predictions.n_windows if count is None else min(count, predictions.n_windows)

@@ -27,7 +27,7 @@ from omegaconf import DictConfig
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, wrap_positions
 from gripdem.data.cache import ensure_scene_dataset
-from gripdem.data.schema import TrajectoryData
+from gripdem.data.schema import TrajectoryData, write_dataset
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
@@ -138,3 +138,16 @@ def tiny_pbc_path(gripdem_data_root) -> Path:
 def tiny_lebc_path(gripdem_data_root) -> Path:
     """Tiny Lees-Edwards dataset (3 simulations x 61 frames x 400 particles), validated."""
     return _tiny_dataset("lebc", gripdem_data_root)
+
+
+@pytest.fixture(scope="session")
+def le_file(tmp_path_factory):
+    """3 sheared simulations x 40 frames x 24 particles, crossing the LE faces often."""
+    data = make_trajectories(n_sims=3, n_frames=40, n_particles=24, lees_edwards=True, seed=11)
+    return write_dataset(tmp_path_factory.mktemp("files") / "le.h5", data)
+
+
+@pytest.fixture(scope="session")
+def pbc_file(tmp_path_factory):
+    data = make_trajectories(n_sims=3, n_frames=40, n_particles=24, lees_edwards=False, seed=12)
+    return write_dataset(tmp_path_factory.mktemp("files") / "pbc.h5", data)

@@ -15,7 +15,6 @@ import lightning as L
 import pytest
 from hydra import compose, initialize_config_dir
 
-from gripdem.data.schema import write_dataset
 from gripdem.experiment import build_datamodule, build_model
 from gripdem.run import CONFIG_DIR
 
@@ -48,19 +47,6 @@ def make_checkpoint(data_path: Path, out: Path, overrides: list[str]) -> Path:
 def make_checkpoint_fixture():
     """``make_checkpoint(data_path, out_dir, overrides) -> checkpoint path``."""
     return make_checkpoint
-
-
-@pytest.fixture(scope="session")
-def le_file(tmp_path_factory, trajectories):
-    """3 sheared simulations x 40 frames x 24 particles, crossing the LE faces often."""
-    data = trajectories(n_sims=3, n_frames=40, n_particles=24, lees_edwards=True, seed=11)
-    return write_dataset(tmp_path_factory.mktemp("engine") / "le.h5", data)
-
-
-@pytest.fixture(scope="session")
-def pbc_file(tmp_path_factory, trajectories):
-    data = trajectories(n_sims=3, n_frames=40, n_particles=24, lees_edwards=False, seed=12)
-    return write_dataset(tmp_path_factory.mktemp("engine") / "pbc.h5", data)
 
 
 @pytest.fixture(scope="session")

@@ -25,7 +25,7 @@ What the importer does (and why):
   against it, and so is every snapshot's tilt; then particles crossing the x faces must move as
   little as the others (the convention is right). An orthogonal box with ``shear_rate`` is
   treated like the Fordatis files: sign and origin inferred from the crossers
-  (:func:`gripdem.data.le_inference.infer_lees_edwards`); without, it is periodic (checked).
+  (:func:`gripdem.formats.le_inference.infer_lees_edwards`); without, it is periodic (checked).
 
 Lengths and times keep the dump's units; gripdem's format and built-in models are SI, so give
 ``diameter`` and ``timestep`` in the dump's units and use SI dumps (``units si``) for them.
@@ -47,16 +47,16 @@ from gripdem.boundary import (
     check_volume_fraction,
     wrap_positions,
 )
-from gripdem.data.lammps_dump import DumpError
-from gripdem.data.lammps_series import AxisMap, DumpSeries, read_series
-from gripdem.data.lammps_tilt import check_crossers, tilt_lees_edwards
-from gripdem.data.le_inference import (
+from gripdem.data.schema import TrajectoryData, validate
+from gripdem.formats.lammps_dump import DumpError
+from gripdem.formats.lammps_series import AxisMap, DumpSeries, read_series
+from gripdem.formats.lammps_tilt import check_crossers, tilt_lees_edwards
+from gripdem.formats.le_inference import (
     LeEvidence,
     check_le_options,
     find_crossings,
     infer_lees_edwards,
 )
-from gripdem.data.schema import TrajectoryData, validate
 
 
 @dataclass
@@ -157,7 +157,7 @@ def read_lammps(
     split_files: bool = False,
 ) -> tuple[TrajectoryData, LammpsReport]:
     """Import LAMMPS text dumps; returns the validated dataset and a report. Raises
-    :class:`~gripdem.data.lammps_dump.DumpError` (a ``DatasetError``) naming the file, item
+    :class:`~gripdem.formats.lammps_dump.DumpError` (a ``DatasetError``) naming the file, item
     and snapshot, or ``ValueError`` for a bad option; nothing is written here."""
     _check_options(diameter, timestep, shear_rate, le_sign, time_origin)
     paths = [Path(p) for p in paths]
@@ -249,7 +249,7 @@ def read_lammps(
         velocities=velocities,
         radii=radii,
         provenance={
-            "generator": "gripdem.data.lammps",
+            "generator": "gripdem.formats.lammps",
             "version": gripdem.__version__,
             "parameters": {
                 "files": [[str(p) for p in g] for g in groups],

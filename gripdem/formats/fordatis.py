@@ -20,7 +20,7 @@ What the importer does (and why):
   diameter, SPEC §2) sets the radius;
 - Lees-Edwards data: the shear rate comes from the user, the sign convention and the time origin
   (time at which delta = 0) are inferred from particles that cross the x faces, and the shear
-  rate is checked against them: :func:`gripdem.data.le_inference.infer_lees_edwards`. Periodic
+  rate is checked against them: :func:`gripdem.formats.le_inference.infer_lees_edwards`. Periodic
   data (no shear rate) is checked too: its crossers must not jump in z.
 
 Archive members are copied one at a time into a private temporary directory under a generated
@@ -47,13 +47,13 @@ import numpy as np
 
 import gripdem
 from gripdem.boundary import Boundary, Box, check_volume_fraction, wrap_positions
-from gripdem.data.le_inference import (
+from gripdem.data.schema import TIME_RTOL, DatasetError, TrajectoryData, validate
+from gripdem.formats.le_inference import (
     LeEvidence,
     check_le_options,
     find_crossings,
     infer_lees_edwards,
 )
-from gripdem.data.schema import TIME_RTOL, DatasetError, TrajectoryData, validate
 
 #: the paper's particle size, taken as a diameter (SPEC §2)
 DEFAULT_DIAMETER = 2.5e-6
@@ -491,7 +491,7 @@ def read_fordatis(
         boundary=boundary,
         radius=0.5 * diameter,
         provenance={
-            "generator": "gripdem.data.fordatis",
+            "generator": "gripdem.formats.fordatis",
             "version": gripdem.__version__,
             "parameters": {
                 "source": str(source),

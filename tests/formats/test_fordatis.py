@@ -19,8 +19,8 @@ import pytest
 
 from gripdem.boundary import Box, LeesEdwards, wrap_coordinate, wrap_positions
 from gripdem.convert import main
-from gripdem.data.fordatis import DEFAULT_DIAMETER, read_fordatis
 from gripdem.data.schema import DatasetError, read_dataset
+from gripdem.formats.fordatis import DEFAULT_DIAMETER, read_fordatis
 
 BOX = Box(3.2e-5, 2.8e-5, 3.6e-5)  # not cubic on purpose
 D = DEFAULT_DIAMETER
@@ -445,7 +445,7 @@ def test_cli_converts_and_reports(tmp_path):
     data = read_dataset(out)
     assert data.positions.shape == (2, 36, 80, 3)
     assert data.boundary.lees_edwards.sign == -1
-    assert data.provenance["generator"] == "gripdem.data.fordatis"
+    assert data.provenance["generator"] == "gripdem.formats.fordatis"
     pos, times, ids = truths[1]
     assert_same_positions(data.positions[1], by_id(pos, ids)[4:])
 

@@ -10,8 +10,8 @@ import pytest
 
 from gripdem.boundary import minimum_image, wrap_positions
 from gripdem.convert import main as convert
-from gripdem.data.lammps_series import AxisMap
 from gripdem.data.schema import read_dataset
+from gripdem.formats.lammps_series import AxisMap
 from gripdem.handback import main
 
 YZX = AxisMap.parse("yzx")

@@ -35,7 +35,7 @@ import numpy as np
 
 from gripdem import metrics
 from gripdem.data.h5io import atomic_write_text
-from gripdem.data.lammps_dump import dump_text
+from gripdem.formats.lammps_dump import dump_text
 from gripdem.predictions import Predictions, read_predictions
 
 FLOAT = "%.12g"

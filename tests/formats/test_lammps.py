@@ -17,9 +17,9 @@ import pytest
 
 from gripdem.boundary import Box, LeesEdwards, minimum_image, wrap_into_sheared_cell, wrap_positions
 from gripdem.convert import main
-from gripdem.data.lammps import read_lammps
-from gripdem.data.lammps_series import AxisMap
 from gripdem.data.schema import read_dataset
+from gripdem.formats.lammps import read_lammps
+from gripdem.formats.lammps_series import AxisMap
 
 D = 1.0e-3  # diameter (any units: the importer keeps the dump's)
 BOX = Box(8 * D, 7 * D, 9 * D)  # ours; not cubic

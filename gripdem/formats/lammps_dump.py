@@ -13,7 +13,7 @@ A dump is a sequence of snapshots, each a set of ``ITEM:`` blocks::
 Other items (``ITEM: TIME``, ``ITEM: UNITS`` of ``dump_modify time/units yes``) are kept as
 text or skipped. Files may hold one or many snapshots and may be gzip-compressed (by suffix or
 content). This module knows the text format only: which columns hold what and how the box is
-turned into lattice vectors; :mod:`gripdem.data.lammps` maps a dump onto gripdem's conventions.
+turned into lattice vectors; :mod:`gripdem.formats.lammps` maps a dump onto gripdem's conventions.
 
 Box of a snapshot (LAMMPS axes): origin ``lo (3,)``, lattice vectors as the rows of
 ``cell (3, 3)`` = ``a = (Lx, 0, 0)``, ``b = (xy, Ly, 0)``, ``c = (xz, yz, Lz)``; for a triclinic

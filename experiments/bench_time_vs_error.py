@@ -56,7 +56,7 @@ from gripdem.data.batch import collate_windows  # noqa: E402
 from gripdem.data.datamodule import TrajectoryDataModule  # noqa: E402
 from gripdem.dem.engine import Simulation  # noqa: E402
 from gripdem.dem.params import GeneratorConfig  # noqa: E402
-from gripdem.metrics import position_residuals, rmse  # noqa: E402
+from gripdem.evaluation.metrics import position_residuals, rmse  # noqa: E402
 from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 BASELINE_NAMES = ("stay", "constant_velocity", "mean_flow", "linear_ar")

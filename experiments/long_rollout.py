@@ -30,9 +30,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from gripdem.boundary import affine_flow_strain, displacement  # noqa: E402
-from gripdem.physics import overlap_fraction  # noqa: E402
+from gripdem.evaluation.physics import overlap_fraction  # noqa: E402
+from gripdem.evaluation.predictions import read_predictions  # noqa: E402
 from gripdem.predict import build_parser, predict  # noqa: E402
-from gripdem.predictions import read_predictions  # noqa: E402
 
 COLORS = {
     "model": "k",

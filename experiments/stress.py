@@ -46,7 +46,7 @@ from gripdem.checkpoint import load_model
 from gripdem.data.batch import collate_windows
 from gripdem.data.schema import read_dataset, read_meta, write_dataset
 from gripdem.data.units import rescale
-from gripdem.metrics import position_residuals, rmse
+from gripdem.evaluation.metrics import position_residuals, rmse
 from gripdem.models.module import TrajectoryModule
 from gripdem.rollout import rollout
 

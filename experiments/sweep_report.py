@@ -2,8 +2,8 @@
 
     python experiments/sweep_report.py SWEEP_DIR [SWEEP_DIR ...] [--out experiments/figures]
 
-Reads every job's ``metrics.json`` (through :func:`gripdem.summary.collect`), groups the jobs by
-(scene, split, model) over seeds and writes into ``--out``:
+Reads every job's ``metrics.json`` (through :func:`gripdem.evaluation.sweep_summary.collect`),
+groups the jobs by (scene, split, model) over seeds and writes into ``--out``:
 
 - ``results.md``: per scene, RMSE / d and the ratio to constant velocity (CV) and to the linear
   AR baseline as mean ± std over seeds, beside CV, AR and the mean-flow profile, LE crossers
@@ -34,8 +34,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from gripdem.data.h5io import atomic_path
+from gripdem.evaluation.sweep_summary import runs_by_group
 from gripdem.plots import save_figure
-from gripdem.summary import runs_by_group
 
 SPLIT_ORDER = ("190-10", "180-20", "150-50", "100-100")
 BASELINES = ("constant_velocity", "linear_ar", "mean_flow")

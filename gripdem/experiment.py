@@ -6,7 +6,7 @@ the working directory):
 
     tensorboard/        event files: scalars, HParams (hp/ metrics), figures as images
     checkpoints/        best.ckpt (lowest val/rmse), last.ckpt
-    predictions.h5      test windows: prediction, truth, baselines (gripdem.predictions)
+    predictions.h5      test windows: prediction, truth, baselines (gripdem.evaluation.predictions)
     figures/*.png       the paper's figures (gripdem.plots)
     trajectories/*.xyz  predicted and true trajectories for OVITO / ParaView
     metrics.json        final metrics, baselines, timings, data summary
@@ -33,10 +33,10 @@ from gripdem.console import lightning_info_muted, quiet_console
 from gripdem.data.cache import ensure_scene_dataset
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
+from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
-from gripdem.predictions import Predictions, write_predictions
 
 log = logging.getLogger(__name__)
 
@@ -285,9 +285,9 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
 
 def physics_metrics(predictions: Predictions) -> tuple[dict[str, float], Any]:
     """The physics report of the test windows (truth, model and every baseline side by side,
-    :mod:`gripdem.physics_report`) as ``test/physics/<set>/<name>`` and, in an LE box,
+    :mod:`gripdem.evaluation.physics_report`) as ``test/physics/<set>/<name>`` and, in an LE box,
     ``test/crossers/...`` (RMSE of the crossers with a bootstrap interval); and the report."""
-    from gripdem.physics_report import physics_report
+    from gripdem.evaluation.physics_report import physics_report
 
     report = physics_report(predictions)
     out = {}

@@ -1,6 +1,6 @@
 """The paper's figures for one run (SPEC §6), drawn from its predictions.
 
-Every function takes a :class:`gripdem.predictions.Predictions` and returns a matplotlib
+Every function takes a :class:`gripdem.evaluation.predictions.Predictions` and returns a matplotlib
 ``Figure`` on its own Agg canvas: no pyplot, no global backend switch, no open windows, safe in
 sweep workers. Lengths are shown in
 particle diameters d, velocities in d per frame interval. :func:`make_run_figures` draws them
@@ -33,10 +33,10 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from gripdem import metrics
 from gripdem.boundary import lattice_shift, unwrap_trajectory
 from gripdem.data.h5io import atomic_path
-from gripdem.physics import (
+from gripdem.evaluation import metrics
+from gripdem.evaluation.physics import (
     OVERLAP_TOLERANCE,
     fit_profile,
     overlap_fraction,
@@ -44,7 +44,7 @@ from gripdem.physics import (
     profile_basis,
     velocity_profile,
 )
-from gripdem.predictions import Predictions, read_predictions
+from gripdem.evaluation.predictions import Predictions, read_predictions
 
 FIGURES = ("rmse_per_step", "crossers", "velocity_profile", "parity_z", "pair_distances")
 #: at most this many points per group in the parity plot (a random subset beyond)
@@ -368,7 +368,8 @@ def run_figures(
     physics: Any = None,
 ) -> dict[str, Figure]:
     """All figures of :data:`FIGURES` for one run, by name, and ``physics`` (truth, model and
-    baselines side by side) when a :class:`~gripdem.physics_report.PhysicsReport` is given."""
+    baselines side by side) when a :class:`~gripdem.evaluation.physics_report.PhysicsReport` is
+    given."""
     figures = {
         "rmse_per_step": plot_rmse_per_step(p),
         "crossers": plot_crossers(p),

@@ -1,6 +1,6 @@
 """The physics figure of a run: truth, model and every baseline side by side, from a
-:class:`~gripdem.physics_report.PhysicsReport` (four panels: z-velocity profile, g(r) at the
-last predicted step, non-affine MSD over the horizon, distribution of the non-affine z
+:class:`~gripdem.evaluation.physics_report.PhysicsReport` (four panels: z-velocity profile, g(r) at
+the last predicted step, non-affine MSD over the horizon, distribution of the non-affine z
 displacement at the last step).
 Agg canvas only, like :mod:`gripdem.plots`."""
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from gripdem.physics_report import PhysicsReport
+from gripdem.evaluation.physics_report import PhysicsReport
 from gripdem.plots import BASELINE_LABELS, _figure
 
 #: drawing order and styles: the truth and the model on top, baselines thinner

@@ -13,9 +13,9 @@ horizon ``f``), chaining its own predictions beyond ``f`` (:mod:`gripdem.rollout
 Writes (atomically; existing files are kept unless ``--overwrite``):
 
 - ``PRED.h5`` (``--out``, default ``predictions.h5``): the ``predictions.h5`` layout of
-  :mod:`gripdem.predictions` for the predicted frames that have a truth in the data, one window
-  per simulation, with the baselines (stay, constant velocity, linear AR, mean flow) rolled out
-  from the same observed frames in one go;
+  :mod:`gripdem.evaluation.predictions` for the predicted frames that have a truth in the data, one
+  window per simulation, with the baselines (stay, constant velocity, linear AR, mean flow) rolled
+  out from the same observed frames in one go;
 - ``TRAJ.h5`` (default ``PRED_trajectory.h5``): the observed frames followed by all predicted
   ones as a gripdem dataset, the input of :mod:`gripdem.handback` (and of this command again);
 - ``REPORT.json`` (default ``PRED_rollout.json``): per predicted frame the RMSE of the model and
@@ -37,8 +37,8 @@ import torch
 from gripdem.checkpoint import check_compatible, load_model, training_overlap
 from gripdem.data.h5io import atomic_write_text
 from gripdem.data.schema import DatasetMeta, TrajectoryData, read_meta, write_dataset
-from gripdem.metrics import position_residuals, rmse_per_step
-from gripdem.predictions import Predictions, write_predictions
+from gripdem.evaluation.metrics import position_residuals, rmse_per_step
+from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.rollout import OVERLAP_MARGIN, rollout
 
 

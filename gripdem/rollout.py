@@ -35,7 +35,7 @@ from gripdem.data.batch import collate_windows
 from gripdem.data.datamodule import WindowDataset
 from gripdem.data.schema import DatasetMeta
 from gripdem.data.windows import Segment, WindowIndex
-from gripdem.physics import overlap_fraction
+from gripdem.evaluation.physics import overlap_fraction
 
 #: a predicted step longer than this fraction of the smallest box length counts as an escape
 ESCAPE_FRACTION = 0.25

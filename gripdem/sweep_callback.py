@@ -1,7 +1,8 @@
 """Hydra callback: after a multirun, one summary table across its jobs (Markdown and CSV).
 
 Registered in ``conf/config.yaml`` under ``hydra.callbacks``; the table itself is built by
-:func:`gripdem.summary.write_summary` (also ``python -m gripdem.summary SWEEP_DIR``).
+:func:`gripdem.evaluation.sweep_summary.write_summary` (also ``python -m gripdem.summary
+SWEEP_DIR``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from gripdem.summary import write_summary
+from gripdem.evaluation.sweep_summary import write_summary
 
 log = logging.getLogger(__name__)
 

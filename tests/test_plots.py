@@ -7,9 +7,9 @@ import torch
 from matplotlib.image import imread
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, rewrap_trajectory
+from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.models.baselines import predict_baseline
 from gripdem.plots import FIGURES, _pick_crossers, figure_to_array, make_run_figures
-from gripdem.predictions import Predictions, write_predictions
 
 D = 2.5e-6  # diameter (m), as the default scenes
 DT = 5e-6

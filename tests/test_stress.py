@@ -30,8 +30,8 @@ from gripdem.data.units import rescale
 from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig
 from gripdem.dem.scenes import simulate_one
+from gripdem.evaluation.metrics import position_residuals, rmse
 from gripdem.experiment import build_datamodule, build_model
-from gripdem.metrics import position_residuals, rmse
 from gripdem.models.baselines import constant_velocity
 from gripdem.run import CONFIG_DIR
 

@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gripdem import metrics
 from gripdem.data.h5io import atomic_write_text
+from gripdem.evaluation import metrics
+from gripdem.evaluation.predictions import Predictions, read_predictions
 from gripdem.formats.lammps_dump import dump_text
-from gripdem.predictions import Predictions, read_predictions
 
 FLOAT = "%.12g"
 

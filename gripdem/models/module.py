@@ -2,8 +2,8 @@
 
 Training minimises the mode's loss (see :mod:`gripdem.models.decoder_modes`); validation and
 test roll the model out over the horizon, decode to wrapped Cartesian positions and score them
-with the LE-aware RMSE of :mod:`gripdem.metrics`, beside the baselines on the same windows.
-The best checkpoint is chosen on ``val/rmse`` (the rollout), not on the training loss.
+with the LE-aware RMSE of :mod:`gripdem.evaluation.metrics`, beside the baselines on the same
+windows. The best checkpoint is chosen on ``val/rmse`` (the rollout), not on the training loss.
 
 Encoders (``encoder["name"]``): ``graph_conv`` (the paper's graph convolution on the fixed
 graph, :mod:`gripdem.nn.graph_conv`) and ``interaction`` (learned pair messages from relative
@@ -29,7 +29,7 @@ from gripdem.boundary import (
     step_start_x,
 )
 from gripdem.data.features import Normalizer, make_encoding
-from gripdem.metrics import position_residuals, rmse_per_step, rmse_split
+from gripdem.evaluation.metrics import position_residuals, rmse_per_step, rmse_split
 from gripdem.models import decoder_modes as modes
 from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES, predict_baseline

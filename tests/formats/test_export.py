@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, rewrap_trajectory
+from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.formats.export import export_extxyz, export_lammps, write_lammps_dump
-from gripdem.predictions import Predictions, write_predictions
 
 BOX = Box(2.0, 2.5, 3.0)
 DT = 0.05

@@ -7,7 +7,13 @@ import pytest
 import torch
 
 from gripdem.boundary import Box, LeesEdwards, minimum_image, rewrap_trajectory
-from gripdem.metrics import crossing_mask, position_residuals, rmse, rmse_per_step, summarize
+from gripdem.evaluation.metrics import (
+    crossing_mask,
+    position_residuals,
+    rmse,
+    rmse_per_step,
+    summarize,
+)
 from gripdem.models.baselines import constant_velocity, mean_flow, predict_baseline, stay
 
 BOX = Box(2.0, 2.5, 3.0)

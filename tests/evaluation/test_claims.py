@@ -5,8 +5,9 @@ import math
 
 import pytest
 
-from gripdem.claims import HELD, NOT_HELD, UNDECIDED, combine, decide, evaluate, main
-from gripdem.summary import runs_by_group
+from gripdem.claims import main
+from gripdem.evaluation.claims import HELD, NOT_HELD, UNDECIDED, combine, decide, evaluate
+from gripdem.evaluation.sweep_summary import runs_by_group
 
 SPLITS = ("190-10", "180-20", "150-50", "100-100")
 

@@ -10,12 +10,8 @@ import pytest
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, rewrap_trajectory
 from gripdem.data.schema import DatasetError
-from gripdem.predictions import (
-    Predictions,
-    evaluate_predictions,
-    read_predictions,
-    write_predictions,
-)
+from gripdem.evaluation.evaluate import evaluate_predictions
+from gripdem.evaluation.predictions import Predictions, read_predictions, write_predictions
 
 BOX = Box(2.0, 2.5, 3.0)
 LE = LeesEdwards(shear_rate=2.0, sign=-1, time_origin=0.1)

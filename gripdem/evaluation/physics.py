@@ -6,12 +6,12 @@ cell lists on the triclinic Lees-Edwards cell, never an n x n matrix); for a cut
 the smallest box length every pair has at most one image inside the cut-off, and that image is
 the SPEC minimum image.
 
-Layouts (as :mod:`gripdem.metrics`): one frame ``(particles, 3)`` with a scalar offset, a stack of
-frames ``(frames, particles, 3)`` with offsets ``(frames,)``, windows of predictions
-``(windows, horizon, particles, 3)`` with offsets ``(windows, horizon)`` and last observed
-positions ``(windows, particles, 3)``. Offsets are the float64 LE offsets delta of each frame
-(zeros or ``None`` for a periodic box). Lengths come back in the positions' units; divide by
-the diameter for "in diameters".
+Layouts (as :mod:`gripdem.evaluation.metrics`): one frame ``(particles, 3)`` with a scalar offset, a
+stack of frames ``(frames, particles, 3)`` with offsets ``(frames,)``, windows of predictions
+``(windows, horizon, particles, 3)`` with offsets ``(windows, horizon)`` and last observed positions
+``(windows, particles, 3)``. Offsets are the float64 LE offsets delta of each frame (zeros or
+``None`` for a periodic box). Lengths come back in the positions' units; divide by the diameter for
+"in diameters".
 """
 
 from __future__ import annotations

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, rewrap_trajectory, wrap_positions
-from gripdem.physics import coordination_number, radial_distribution
-from gripdem.physics_report import bootstrap_rmse, physics_report
-from gripdem.predictions import Predictions
+from gripdem.evaluation.physics import coordination_number, radial_distribution
+from gripdem.evaluation.physics_report import bootstrap_rmse, physics_report
+from gripdem.evaluation.predictions import Predictions
 
 DT = 0.05
 
@@ -136,8 +136,8 @@ def test_command_line_reports_a_predictions_file(tmp_path, capsys):
     scalars as the report, the figure is written."""
     import json
 
+    from gripdem.evaluation.predictions import write_predictions
     from gripdem.physics_report import main
-    from gripdem.predictions import write_predictions
 
     p, _ = affine_predictions(le=True, drift=0.02)
     path = write_predictions(tmp_path / "predictions.h5", p)

@@ -8,7 +8,8 @@ import sys
 
 import pytest
 
-from gripdem.summary import collect, main, parse_overrides, table, write_summary
+from gripdem.evaluation.sweep_summary import collect, parse_overrides, table, write_summary
+from gripdem.summary import main
 
 
 def make_job(root, number, overrides, metrics=None, config=None):

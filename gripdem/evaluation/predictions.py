@@ -20,8 +20,8 @@ Layout (lengths in the source data's units, metres by default; times in seconds)
 
 The LE offset of predicted frame j of window w is ``Boundary.offset(times[w, j])``; the truth
 is compared with the prediction at the same frame (that frame's offset), displacements between
-frames use the later frame's offset (SPEC §2). :func:`evaluate_predictions` recomputes all
-metrics from the file alone.
+frames use the later frame's offset (SPEC §2).
+:func:`gripdem.evaluation.evaluate.evaluate_predictions` recomputes all metrics from the file alone.
 """
 
 from __future__ import annotations
@@ -35,7 +35,6 @@ from typing import Any
 import h5py
 import numpy as np
 
-from gripdem import metrics
 from gripdem.boundary import Boundary, Box
 from gripdem.data.h5io import atomic_h5_write
 from gripdem.data.schema import (
@@ -275,50 +274,3 @@ def read_predictions(path: str | os.PathLike) -> Predictions:
         )
     validate(p, path)
     return p
-
-
-# --------------------------------------------------------------------------------------------
-# metrics, recomputed from the file alone
-# --------------------------------------------------------------------------------------------
-def _summary(p: Predictions, pred: np.ndarray, offsets: np.ndarray) -> dict[str, float]:
-    return metrics.summarize(
-        pred,
-        p.true_positions,
-        p.last_positions,
-        p.box,
-        p.diameter,
-        offsets,
-        le=p.boundary.is_lees_edwards,
-    )
-
-
-def evaluate_predictions(
-    source: str | os.PathLike | Predictions, physics: bool = True
-) -> dict[str, Any]:
-    """Every metric of a run from its predictions, computed independently of the training code.
-
-    Keys: the model's :func:`gripdem.metrics.summarize` keys (``rmse``, ``rmse_over_d``,
-    ``rmse_step/001`` ..., and for LE data ``rmse_crossers``, ``rmse_others``, ``n_crossers``);
-    the same under ``baseline/<name>/`` for each stored baseline; with ``physics=True`` the
-    physics report (:func:`gripdem.physics_report.physics_report`: ``physics/<set>/<name>`` for
-    the truth, the model and each baseline, and for LE data ``crossers/...`` with bootstrap
-    intervals); and ``n_windows``, ``n_particles``, ``horizon``, ``in_sample``.
-    """
-    p = source if isinstance(source, Predictions) else read_predictions(source)
-    offsets = p.offsets()
-    out: dict[str, Any] = dict(_summary(p, p.pred_positions, offsets))
-    for name, arr in sorted(p.baselines.items()):
-        for key, value in _summary(p, arr, offsets).items():
-            out[f"baseline/{name}/{key}"] = value
-    if physics:
-        from gripdem.physics_report import physics_report
-
-        for key, value in physics_report(p).metrics.items():
-            out[key if key.startswith("crossers/") else f"physics/{key}"] = value
-    out.update(
-        n_windows=p.n_windows,
-        n_particles=p.n_particles,
-        horizon=p.horizon,
-        in_sample=bool(p.in_sample),
-    )
-    return out

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import Box, LeesEdwards, rewrap_trajectory
-from gripdem.physics import (
+from gripdem.evaluation.physics import (
     coordination_number,
     coordination_numbers,
     fit_profile,

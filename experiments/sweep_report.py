@@ -35,7 +35,7 @@ from matplotlib.figure import Figure
 
 from gripdem.data.h5io import atomic_path
 from gripdem.evaluation.sweep_summary import runs_by_group
-from gripdem.plots import save_figure
+from gripdem.plots.common import save_figure
 
 SPLIT_ORDER = ("190-10", "180-20", "150-50", "100-100")
 BASELINES = ("constant_velocity", "linear_ar", "mean_flow")

@@ -7,7 +7,7 @@ the working directory):
     tensorboard/        event files: scalars, HParams (hp/ metrics), figures as images
     checkpoints/        best.ckpt (lowest val/rmse), last.ckpt
     predictions.h5      test windows: prediction, truth, baselines (gripdem.evaluation.predictions)
-    figures/*.png       the paper's figures (gripdem.plots)
+    figures/*.png       the paper's figures (gripdem.plots.run)
     trajectories/*.xyz  predicted and true trajectories for OVITO / ParaView
     metrics.json        final metrics, baselines, timings, data summary
 """
@@ -306,10 +306,11 @@ def write_outputs(
     if outputs["predictions"]:
         write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
     if outputs["figures"]:
-        from gripdem.plots import make_run_figures
+        from gripdem.evaluation.figure_data import run_figure_data
+        from gripdem.plots.run import make_run_figures
 
         make_run_figures(
-            predictions,
+            run_figure_data(predictions),
             out_dir / "figures",
             writer=logger.experiment,
             step=step,

@@ -10,8 +10,8 @@ import json
 from gripdem.data.h5io import atomic_path
 from gripdem.evaluation.physics_report import physics_report, report_table
 from gripdem.evaluation.predictions import read_predictions
-from gripdem.plots import save_figure
-from gripdem.plots_physics import plot_physics
+from gripdem.plots.common import save_figure
+from gripdem.plots.physics import plot_physics
 
 
 def main(argv: list[str] | None = None) -> int:

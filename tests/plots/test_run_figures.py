@@ -1,5 +1,5 @@
-"""The run figures are drawn from a predictions file, written as non-trivial PNGs and logged to
-TensorBoard; a synthetic sheared packing stands in for a DEM scene."""
+"""The run figures are drawn from the figure data of a predictions file, written as non-trivial
+PNGs and logged to TensorBoard; a synthetic sheared packing stands in for a DEM scene."""
 
 import numpy as np
 import pytest
@@ -7,9 +7,11 @@ import torch
 from matplotlib.image import imread
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, rewrap_trajectory
-from gripdem.evaluation.predictions import Predictions, write_predictions
+from gripdem.evaluation.figure_data import pick_crossers, rmse_curves, run_figure_data
+from gripdem.evaluation.predictions import Predictions, read_predictions, write_predictions
 from gripdem.models.baselines import predict_baseline
-from gripdem.plots import FIGURES, _pick_crossers, figure_to_array, make_run_figures
+from gripdem.plots import figure_to_array
+from gripdem.plots.run import FIGURES, make_run_figures, plot_rmse_per_step
 
 D = 2.5e-6  # diameter (m), as the default scenes
 DT = 5e-6
@@ -93,7 +95,8 @@ def test_figures_are_written_as_readable_pngs_and_logged(tmp_path, le):
             self.images[tag] = image.shape
 
     writer = Writer()
-    paths = make_run_figures(path, tmp_path / "figures", writer=writer, step=3)
+    data = run_figure_data(read_predictions(path))
+    paths = make_run_figures(data, tmp_path / "figures", writer=writer, step=3)
     assert tuple(paths) == FIGURES
     for name, png in paths.items():
         assert png.exists() and png.stat().st_size > 20_000, name
@@ -110,7 +113,8 @@ def test_figures_go_into_a_real_tensorboard_event_file(tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(tmp_path / "tb")
-    make_run_figures(sheared_scene(windows=1, horizon=4), tmp_path / "f", writer=writer)
+    data = run_figure_data(sheared_scene(windows=1, horizon=4))
+    make_run_figures(data, tmp_path / "f", writer=writer)
     writer.close()
     events = list((tmp_path / "tb").glob("events.out.tfevents*"))
     assert events and events[0].stat().st_size > 50_000
@@ -121,13 +125,12 @@ def test_crossers_are_chosen_from_the_truth():
     shifts[1, 4, 3, 0] = -1  # window 1, particle 3 crosses +x at step 4
     shifts[0, 2, 1, 0] = 1  # window 0, particle 1 crosses -x at step 2 (nearer the middle)
     shifts[0, 1, 2, 2] = 1  # a z crossing
-    assert _pick_crossers(shifts, 0, 5) == [(0, 1), (1, 3)]
-    assert _pick_crossers(shifts, 2, 5) == [(0, 2)]
-    assert _pick_crossers(np.zeros_like(shifts), 0, 5) == []
+    assert pick_crossers(shifts, 0, 5) == [(0, 1), (1, 3)]
+    assert pick_crossers(shifts, 2, 5) == [(0, 2)]
+    assert pick_crossers(np.zeros_like(shifts), 0, 5) == []
 
 
 def test_figure_to_array_is_rgb():
-    from gripdem.plots import plot_rmse_per_step
-
-    image = figure_to_array(plot_rmse_per_step(sheared_scene(windows=1, horizon=3)))
+    curves = rmse_curves(sheared_scene(windows=1, horizon=3))
+    image = figure_to_array(plot_rmse_per_step(curves, "title", 3))
     assert image.ndim == 3 and image.shape[2] == 3 and image.dtype == np.uint8

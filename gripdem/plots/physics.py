@@ -2,15 +2,16 @@
 :class:`~gripdem.evaluation.physics_report.PhysicsReport` (four panels: z-velocity profile, g(r) at
 the last predicted step, non-affine MSD over the horizon, distribution of the non-affine z
 displacement at the last step).
-Agg canvas only, like :mod:`gripdem.plots`."""
+Agg canvas only (:mod:`gripdem.plots.common`)."""
 
 from __future__ import annotations
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from gripdem.evaluation.figure_data import BASELINE_LABELS
 from gripdem.evaluation.physics_report import PhysicsReport
-from gripdem.plots import BASELINE_LABELS, _figure
+from gripdem.plots.common import new_figure
 
 #: drawing order and styles: the truth and the model on top, baselines thinner
 _STYLE = {"truth": {"color": "k", "lw": 2.6}, "model": {"color": "C3", "lw": 2.0}}
@@ -36,7 +37,7 @@ def plot_physics(report: PhysicsReport, title: str, model_name: str = "model") -
     c, m = report.curves, report.metrics
     order = ["truth", "model"] + [s for s in report.sets if s not in ("truth", "model")]
     styles = _styles(order)
-    fig = _figure(11.0, 8.0)
+    fig = new_figure(11.0, 8.0)
     ax_profile, ax_gr, ax_msd, ax_na = (fig.add_subplot(2, 2, k) for k in range(1, 5))
     steps = np.arange(1, len(c["truth/msd"]) + 1)
     centres = 0.5 * (c["non_affine_edges"][1:] + c["non_affine_edges"][:-1])

@@ -56,11 +56,11 @@ from benchlib import (
 )
 
 from gripdem.boundary import Boundary
-from gripdem.checkpoint import data_scene
 from gripdem.data.batch import collate_windows
 from gripdem.data.datamodule import WindowDataset
 from gripdem.data.schema import TrajectoryData, read_meta, write_dataset
 from gripdem.data.windows import Segment, WindowIndex
+from gripdem.inference.checkpoint import data_scene
 from gripdem.models.module import TrajectoryModule
 
 OPS = {
@@ -73,12 +73,12 @@ POWER = {"sparse": 1, "dense": 2, "interaction": 1}
 
 
 def base_model(scene: str, data_path: Path, op: str, k: int, split: str) -> TrajectoryModule:
-    """The model of ``op`` at history ``k`` built by :mod:`gripdem.experiment` on the data
+    """The model of ``op`` at history ``k`` built by :mod:`gripdem.runner.experiment` on the data
     (normaliser and AR baseline fitted there)."""
     from hydra import compose, initialize_config_dir
 
-    from gripdem.experiment import build_datamodule, build_model
     from gripdem.run import CONFIG_DIR
+    from gripdem.runner.experiment import build_datamodule, build_model
 
     h, f = split.split("-")
     overrides = [

@@ -38,7 +38,6 @@ import torch
 from benchlib import fmt, load_yaml, machine_line, markdown_table, scene_dataset, set_threads
 
 from gripdem.boundary import Boundary, LeesEdwards
-from gripdem.checkpoint import data_scene
 from gripdem.data.batch import collate_windows
 from gripdem.data.datamodule import WindowDataset, _FrameReader
 from gripdem.data.features import x_face_crossings
@@ -47,6 +46,7 @@ from gripdem.data.schema import read_meta
 from gripdem.data.windows import Segment, WindowIndex
 from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig
+from gripdem.inference.checkpoint import data_scene
 from gripdem.models.baselines import predict_baseline
 from gripdem.models.module import TrajectoryModule
 
@@ -124,8 +124,8 @@ def bench_dem(preset: str, frames: int) -> list[list]:
 def default_model(scene: str, data_path: Path) -> TrajectoryModule:
     from hydra import compose, initialize_config_dir
 
-    from gripdem.experiment import build_datamodule, build_model
     from gripdem.run import CONFIG_DIR
+    from gripdem.runner.experiment import build_datamodule, build_model
 
     overrides = [
         f"scene={scene}",

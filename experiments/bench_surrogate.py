@@ -14,7 +14,7 @@ side in one process:
   absolute time, so the LE offset is right), frames of ``steps_per_frame`` steps of ``dt``
   (printed) timed one by one after one untimed step, the fastest of ``--dem-frames``;
 - **model**: one horizon predicted from the tiled observed frames through
-  :func:`gripdem.rollout.rollout` (the same window code as training: graph, encoding,
+  :func:`gripdem.inference.rollout.rollout` (the same window code as training: graph, encoding,
   forward, decode; no overlap checks), the fastest of ``--repeats``, per predicted frame. A
   chained rollout costs the same per frame. Fastest of several: the least disturbed by other
   jobs on a shared machine (the means are in the JSON). Without ``--checkpoint`` the model is
@@ -50,20 +50,20 @@ from benchlib import (
 )
 
 from gripdem.boundary import Boundary
-from gripdem.checkpoint import data_scene
 from gripdem.data.schema import TrajectoryData, read_meta, write_dataset
 from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig
+from gripdem.inference.checkpoint import data_scene
+from gripdem.inference.rollout import rollout
 from gripdem.models.module import TrajectoryModule
-from gripdem.rollout import rollout
 
 
 def default_model(scene: str, data_path: Path) -> TrajectoryModule:
     """The default model (``python -m gripdem.run scene=...``), untrained, on ``data_path``."""
     from hydra import compose, initialize_config_dir
 
-    from gripdem.experiment import build_datamodule, build_model
     from gripdem.run import CONFIG_DIR
+    from gripdem.runner.experiment import build_datamodule, build_model
 
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose("config", overrides=[f"scene={scene}", f"data.path={data_path}"])

@@ -57,6 +57,7 @@ from gripdem.data.datamodule import TrajectoryDataModule  # noqa: E402
 from gripdem.dem.engine import Simulation  # noqa: E402
 from gripdem.dem.params import GeneratorConfig  # noqa: E402
 from gripdem.evaluation.metrics import position_residuals, rmse  # noqa: E402
+from gripdem.models.autoregressive import fit_on_training_frames
 from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 BASELINE_NAMES = ("stay", "constant_velocity", "mean_flow", "linear_ar")
@@ -307,7 +308,7 @@ def evaluate_run(run: Run, n_windows: int | None, with_baselines: bool) -> tuple
         lags = run.cfg.baselines.ar_lags
         lags = min(int(dm.plan.history_len), 10) if lags is None else int(lags)
         start = time.perf_counter()
-        dm.fit_linear_ar(lags, float(run.cfg.baselines.ar_ridge))
+        fit_on_training_frames(dm, lags, float(run.cfg.baselines.ar_ridge))
         ar_fit = time.perf_counter() - start
         for name in BASELINE_NAMES:
             if name not in model.baselines:

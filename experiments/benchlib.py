@@ -176,7 +176,7 @@ def load_yaml(group: str, name: str) -> dict:
 
 def scene_dataset(scene: str, preset: str) -> Path:
     """The built-in dataset of ``scene`` (pbc | lebc) and ``preset`` (tiny | default | paper)."""
-    from gripdem.data.cache import ensure_scene_dataset
+    from gripdem.dem.output import ensure_scene_dataset
 
     return ensure_scene_dataset(load_yaml("scene", scene), load_yaml("preset", preset))
 
@@ -213,8 +213,8 @@ def train_run(run: Path, overrides: list[str]) -> Path:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from gripdem.experiment import run_experiment
     from gripdem.run import CONFIG_DIR
+    from gripdem.runner.experiment import run_experiment
 
     overrides = [
         *overrides,

@@ -38,9 +38,9 @@ from gripdem.boundary import (
     remove_affine_flow,
     step_start_x,
 )
-from gripdem.data.cache import ensure_scene_dataset
 from gripdem.data.graph import neighbour_pairs
 from gripdem.data.schema import read_meta
+from gripdem.dem.output import ensure_scene_dataset
 
 GAP_BINS = (
     (-1.0, 0.0),

@@ -8,11 +8,12 @@
 Cases:
 
 - **long rollouts**: a trained model chained ``--frames`` (1000) frames on its own
-  predictions from the first frames of its test simulation (:func:`gripdem.rollout.rollout`,
-  links of its horizon), for every given run whose split is 190-10 or 100-100 (``--quick``:
-  smoke models of horizon 5 and 50 on the tiny scenes). Held: every frame finite, inside
-  ``[-l/2, l/2)``, no particle stepping more than a quarter box; the first frame where the
-  overlap check fires is reported (the packing degrading is the known limit, not a failure).
+  predictions from the first frames of its test simulation
+  (:func:`gripdem.inference.rollout.rollout`, links of its horizon), for every given run whose split
+  is 190-10 or 100-100 (``--quick``: smoke models of horizon 5 and 50 on the tiny scenes). Held:
+  every frame finite, inside ``[-l/2, l/2)``, no particle stepping more than a quarter box; the
+  first frame where the overlap check fires is reported (the packing degrading is the known limit,
+  not a failure).
 - **bf16 autocast on CPU, trained models**: test windows under ``torch.autocast("cpu",
   bfloat16)`` against float32. Held: positions within 2 % (RMS) of the network's correction
   to constant velocity and RMSE within 1 % (the tolerances of the fast test).
@@ -42,13 +43,13 @@ from bench_time_vs_error import find_runs, load_run, test_windows
 from benchlib import machine_line, markdown_table, scene_dataset, set_threads, train_run
 
 from gripdem.boundary import minimum_image
-from gripdem.checkpoint import load_model
 from gripdem.data.batch import collate_windows
 from gripdem.data.schema import read_dataset, read_meta, write_dataset
 from gripdem.data.units import rescale
 from gripdem.evaluation.metrics import position_residuals, rmse
+from gripdem.inference.checkpoint import load_model
+from gripdem.inference.rollout import rollout
 from gripdem.models.module import TrajectoryModule
-from gripdem.rollout import rollout
 
 BF16_CORRECTION_TOLERANCE = 0.02
 BF16_RMSE_TOLERANCE = 0.01

@@ -1,6 +1,6 @@
 """``python -m gripdem.run``: the experiment runner (Hydra entry point).
 
-Composes ``conf/config.yaml`` (validated by :mod:`gripdem.config_schema`), makes sure the
+Composes ``conf/config.yaml`` (validated by :mod:`gripdem.runner.config_schema`), makes sure the
 scene's dataset exists, trains, tests out of sample beside the baselines, writes everything
 under the job's output directory and returns ``optimized_metric`` for sweepers (Optuna).
 
@@ -18,7 +18,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from gripdem.config_schema import register
+from gripdem.runner.config_schema import register
 
 CONFIG_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 register()
@@ -26,7 +26,7 @@ register()
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="config")
 def main(cfg: DictConfig) -> float:
-    from gripdem.experiment import run_experiment
+    from gripdem.runner.experiment import run_experiment
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     report = run_experiment(cfg, out_dir)

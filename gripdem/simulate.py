@@ -17,8 +17,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
-from gripdem.data.cache import ensure_scene_dataset
-from gripdem.dem.output import generate_dataset
+from gripdem.dem.output import ensure_scene_dataset, generate_dataset
 from gripdem.dem.params import GeneratorConfig
 from gripdem.dem.validation import report_paths
 

@@ -2,7 +2,7 @@
 trajectories with many face crossings.
 
 ``tiny_pbc_path`` / ``tiny_lebc_path`` are generated once per test session (a few seconds
-each) through :func:`gripdem.data.cache.ensure_scene_dataset` into a session temporary
+each) through :func:`gripdem.dem.output.ensure_scene_dataset` into a session temporary
 directory, from the same configs as ``python -m gripdem.simulate scene=... preset=tiny``.
 
 ``trajectories(...)`` makes small real trajectories: particles move in lattice-continuous
@@ -26,8 +26,8 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, wrap_positions
-from gripdem.data.cache import ensure_scene_dataset
 from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.dem.output import ensure_scene_dataset
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 

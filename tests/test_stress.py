@@ -2,7 +2,7 @@
 ``experiments/stress.py``; its ``--quick`` mode is a slow-tier test below).
 
 Every test's docstring says what was tried and what must hold. Real components throughout:
-the built-in DEM, real HDF5 files, models built by :mod:`gripdem.experiment` and trained by
+the built-in DEM, real HDF5 files, models built by :mod:`gripdem.runner.experiment` and trained by
 Lightning where training matters. Models that are not trained are either untrained (an
 exact-frame model is then constant velocity, SPEC §11) or "perturbed": every weight moved by
 seeded noise, so the network's output is far from zero and every layer matters.
@@ -31,9 +31,9 @@ from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig
 from gripdem.dem.scenes import simulate_one
 from gripdem.evaluation.metrics import position_residuals, rmse
-from gripdem.experiment import build_datamodule, build_model
 from gripdem.models.baselines import constant_velocity
 from gripdem.run import CONFIG_DIR
+from gripdem.runner.experiment import build_datamodule, build_model
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"

@@ -1,13 +1,14 @@
-"""Dataset cache (SPEC §3): generated scenes live in one documented place, keyed by a hash.
+"""Dataset cache (SPEC §3): generated datasets live in one documented place, keyed by a hash.
 
 Location: ``$GRIPDEM_DATA`` if set, else the user cache directory
-(``platformdirs.user_cache_dir("gripdem")``, e.g. ``~/.cache/gripdem`` on Linux).
-File name: ``<scene>-<preset>-<key>.h5`` where ``key`` hashes the full generator
-configuration (scene physics, preset sizes, sims, seed, backend) and the generator version,
-so a changed parameter or a new generator version never reuses a stale file. A file lock
-(``<file>.lock``) makes parallel sweep jobs wait for one generation instead of racing; the
-dataset is written atomically, so a crash or Ctrl-C leaves nothing half-written. The
-validation report (``.validation.json`` + ``.profile.png``) is written next to it.
+(``platformdirs.user_cache_dir("gripdem")``, e.g. ``~/.cache/gripdem`` on Linux). A file name
+carries a key that hashes everything the data depends on (:func:`content_key`), so a changed
+parameter or a new generator version never reuses a stale file. A file lock (``<file>.lock``)
+makes parallel sweep jobs wait for one generation instead of racing; generators write
+atomically, so a crash or Ctrl-C leaves nothing half-written.
+
+The cache does not know what generates the data: :func:`cached_file` asks the caller for a
+generator (the built-in DEM's is :func:`gripdem.dem.output.ensure_scene_dataset`).
 """
 
 from __future__ import annotations
@@ -16,13 +17,11 @@ import hashlib
 import json
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from filelock import FileLock
-
-from gripdem.dem.params import GENERATOR_VERSION, GeneratorConfig
 
 log = logging.getLogger(__name__)
 
@@ -40,55 +39,25 @@ def data_root(root: str | os.PathLike | None = None) -> Path:
     return Path(user_cache_dir("gripdem"))
 
 
-def config_key(config: GeneratorConfig) -> str:
-    """16 hex digits of SHA-256 over the configuration and the generator version."""
-    payload = json.dumps(
-        {"config": config.to_dict(), "generator_version": GENERATOR_VERSION},
-        sort_keys=True,
-        default=str,
-    )
-    return hashlib.sha256(payload.encode()).hexdigest()[:16]
+def content_key(payload: Any) -> str:
+    """16 hex digits of SHA-256 over ``payload`` as sorted JSON (non-JSON values as strings)."""
+    text = json.dumps(payload, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def dataset_path(config: GeneratorConfig, root: str | os.PathLike | None = None) -> Path:
-    return data_root(root) / f"{config.scene.name}-{config.preset.name}-{config_key(config)}.h5"
-
-
-def ensure_scene_dataset(
-    scene: Mapping[str, Any],
-    preset: Mapping[str, Any],
-    *,
-    sims: int | None = None,
-    seed: int = 0,
-    backend: str = "numba",
-    root: str | os.PathLike | None = None,
-    progress: bool = True,
-    workers: int | None = None,
-    device: str = "cpu",
-) -> Path:
-    """Path of the cached dataset for this configuration, generating it first if needed.
-
-    ``scene``/``preset``: the config nodes (``conf/scene/*.yaml``, ``conf/preset/*.yaml``) as
-    dicts or DictConfigs; ``sims`` overrides the preset's number of simulations.
-    """
-    from gripdem.dem.output import generate_dataset
-
-    config = GeneratorConfig.from_mappings(scene, preset, sims=sims, seed=seed, backend=backend)
-    path = dataset_path(config, root)
+def cached_file(path: Path, generate: Callable[[Path], Any], message: str) -> Path:
+    """``path`` if it exists, else ``generate(path)`` under a file lock (another job that
+    generates the same file first makes this one wait, then find it). ``message`` is logged
+    (or printed when logging is not configured) before generating."""
     if path.exists():
         return path
     path.parent.mkdir(parents=True, exist_ok=True)
     with FileLock(str(path) + ".lock"):
         if path.exists():  # another job generated it while we waited
             return path
-        message = (
-            f"gripdem: generating dataset {path.name} ({config.sims} x "
-            f"{config.preset.frames} frames x {config.preset.particles} particles, "
-            f"scene {config.scene.name}) into {path.parent}"
-        )
         if log.hasHandlers():  # Hydra / Lightning configured logging
             log.info(message)
         else:
             print(message, flush=True)
-        generate_dataset(config, path, progress=progress, workers=workers, device=device)
+        generate(path)
     return path

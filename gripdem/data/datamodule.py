@@ -36,7 +36,6 @@ from gripdem.data.features import (
 from gripdem.data.graph import DEFAULT_ALPHA, Graph, build_graph
 from gripdem.data.schema import DatasetError, DatasetMeta, read_meta
 from gripdem.data.windows import PARTS, Split, WindowIndex, WindowPlan, plan_windows
-from gripdem.models.autoregressive import LinearAR
 
 __all__ = ["TrajectoryDataModule", "WindowBatch", "WindowDataset", "collate_windows"]
 
@@ -298,7 +297,9 @@ class TrajectoryDataModule(L.LightningDataModule):
         """The frames the training windows cover, each frame range once, read in chunks of at
         most ``_FIT_CHUNK_FRAMES`` frames that share ``overlap`` frames with the previous one:
         ``(positions (N, T, 3) wrapped, offsets (T,) float64 or None for a periodic box)``.
-        What the normaliser and the linear AR baseline are fitted on (training data only)."""
+        What the normaliser and the linear AR baseline
+        (:func:`gripdem.models.autoregressive.fit_on_training_frames`) are fitted on (training
+        data only)."""
         if self.plan is None:
             raise RuntimeError("call setup() first")
         offsets = self.meta.boundary.offset(self._times)
@@ -316,16 +317,6 @@ class TrajectoryDataModule(L.LightningDataModule):
         return Normalizer.fit(
             (self.encoding.encode(pos, off) for pos, off in self.training_trajectories()),
             self.encoding.name,
-        )
-
-    def fit_linear_ar(self, lags: int, ridge: float = 1e-6) -> LinearAR:
-        """The linear autoregressive baseline fitted on the training frames (SPEC §6)."""
-        return LinearAR.fit(
-            self.training_trajectories(overlap=lags + 1),
-            self.meta.boundary,
-            self.meta.frame_interval,
-            lags,
-            ridge,
         )
 
     # ---- loaders -------------------------------------------------------------------------

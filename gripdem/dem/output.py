@@ -1,15 +1,20 @@
-"""Generate, validate and write one scene dataset (used by ``gripdem.simulate`` and the cache)."""
+"""Generate, validate and write one scene dataset (``gripdem.simulate``), and find or generate
+the built-in scene datasets in the dataset cache (:mod:`gripdem.data.cache`): the file
+``<scene>-<preset>-<key>.h5``, ``key`` hashing the full generator configuration (scene physics,
+preset sizes, sims, seed, backend) and the generator version."""
 
 from __future__ import annotations
 
 import logging
 import os
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from gripdem.data.cache import cached_file, content_key, data_root
 from gripdem.data.schema import write_dataset
-from gripdem.dem.params import GeneratorConfig
+from gripdem.dem.params import GENERATOR_VERSION, GeneratorConfig
 from gripdem.dem.scenes import generate
 from gripdem.dem.validation import validate_trajectories, write_report
 
@@ -72,3 +77,43 @@ def generate_dataset(
     write_report(report, path, title)
     log.info("wrote %s (%.1f s)", path, generation_time)
     return path, report
+
+
+def config_key(config: GeneratorConfig) -> str:
+    """16 hex digits of SHA-256 over the configuration and the generator version."""
+    return content_key({"config": config.to_dict(), "generator_version": GENERATOR_VERSION})
+
+
+def dataset_path(config: GeneratorConfig, root: str | os.PathLike | None = None) -> Path:
+    return data_root(root) / f"{config.scene.name}-{config.preset.name}-{config_key(config)}.h5"
+
+
+def ensure_scene_dataset(
+    scene: Mapping[str, Any],
+    preset: Mapping[str, Any],
+    *,
+    sims: int | None = None,
+    seed: int = 0,
+    backend: str = "numba",
+    root: str | os.PathLike | None = None,
+    progress: bool = True,
+    workers: int | None = None,
+    device: str = "cpu",
+) -> Path:
+    """Path of the cached dataset for this configuration, generating it first if needed.
+
+    ``scene``/``preset``: the config nodes (``conf/scene/*.yaml``, ``conf/preset/*.yaml``) as
+    dicts or DictConfigs; ``sims`` overrides the preset's number of simulations.
+    """
+    config = GeneratorConfig.from_mappings(scene, preset, sims=sims, seed=seed, backend=backend)
+    path = dataset_path(config, root)
+    message = (
+        f"gripdem: generating dataset {path.name} ({config.sims} x "
+        f"{config.preset.frames} frames x {config.preset.particles} particles, "
+        f"scene {config.scene.name}) into {path.parent}"
+    )
+
+    def generate(target: Path) -> None:
+        generate_dataset(config, target, progress=progress, workers=workers, device=device)
+
+    return cached_file(path, generate, message)

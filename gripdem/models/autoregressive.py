@@ -204,3 +204,15 @@ class LinearAR:
             float(state["ridge"]),
             int(state["n_samples"]),
         )
+
+
+def fit_on_training_frames(datamodule, lags: int, ridge: float = 1e-6) -> LinearAR:
+    """The linear AR baseline fitted on the frames that a set-up
+    :class:`~gripdem.data.datamodule.TrajectoryDataModule`'s training windows cover (SPEC §6)."""
+    return LinearAR.fit(
+        datamodule.training_trajectories(overlap=lags + 1),
+        datamodule.meta.boundary,
+        datamodule.meta.frame_interval,
+        lags,
+        ridge,
+    )

@@ -38,17 +38,17 @@ def test_data_root_order(monkeypatch, tmp_path):
 
 
 def test_key_changes_with_everything_that_changes_the_data(make_config, monkeypatch):
-    base = cache.config_key(make_config("lebc"))
-    assert cache.config_key(make_config("lebc")) == base
+    base = output.config_key(make_config("lebc"))
+    assert output.config_key(make_config("lebc")) == base
     others = [
         make_config("lebc", friction=0.2),
         make_config("lebc", frames=42),
         make_config("pbc"),
         make_config("lebc", sims=2),
     ]
-    assert len({cache.config_key(c) for c in others} | {base}) == 5
-    monkeypatch.setattr(cache, "GENERATOR_VERSION", "999")
-    assert cache.config_key(make_config("lebc")) != base
+    assert len({output.config_key(c) for c in others} | {base}) == 5
+    monkeypatch.setattr(output, "GENERATOR_VERSION", "999")
+    assert output.config_key(make_config("lebc")) != base
 
 
 def _fake_generator(calls):
@@ -68,7 +68,7 @@ def test_generates_once_and_parallel_jobs_wait(tiny_nodes, tmp_path, monkeypatch
     results = []
 
     def job():
-        results.append(cache.ensure_scene_dataset(scene, preset, root=tmp_path, progress=False))
+        results.append(output.ensure_scene_dataset(scene, preset, root=tmp_path, progress=False))
 
     threads = [threading.Thread(target=job) for _ in range(3)]
     for t in threads:
@@ -77,9 +77,9 @@ def test_generates_once_and_parallel_jobs_wait(tiny_nodes, tmp_path, monkeypatch
         t.join()
     assert len(calls) == 1 and len(set(results)) == 1
     assert results[0].name.startswith("lebc-tiny-") and results[0].read_bytes() == b"data"
-    cache.ensure_scene_dataset(scene, preset, root=tmp_path, progress=False)
+    output.ensure_scene_dataset(scene, preset, root=tmp_path, progress=False)
     assert len(calls) == 1  # cached
-    cache.ensure_scene_dataset(scene, preset, root=tmp_path, seed=1, progress=False)
+    output.ensure_scene_dataset(scene, preset, root=tmp_path, seed=1, progress=False)
     assert len(calls) == 2  # another seed is another dataset
 
 

@@ -17,7 +17,7 @@ from gripdem.boundary import (
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.features import x_face_crossings
 from gripdem.data.schema import TrajectoryData, write_dataset
-from gripdem.models.autoregressive import LinearAR
+from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 
 BOX = Box(1.0e-5, 1.2e-5, 0.9e-5)
 DT = 5e-6
@@ -79,7 +79,7 @@ def test_fit_recovers_the_filter_and_predicts_exactly(tmp_path, lees_edwards):
         eval_stride=3,
     )
     dm.setup("fit")
-    ar = dm.fit_linear_ar(LAGS, ridge=0.0)
+    ar = fit_on_training_frames(dm, LAGS, ridge=0.0)
     fitted = np.array(ar.weights)
     np.testing.assert_allclose(fitted[:9], weights[:9], rtol=1e-8, atol=1e-10)  # lags
     np.testing.assert_allclose(fitted[9:], weights[9:], rtol=1e-6, atol=1e-10 * BOX.lx)
@@ -120,7 +120,7 @@ def test_fit_uses_the_training_simulations_only(tmp_path):
         dm = TrajectoryDataModule(path, split="12-8", history_len=5, protocol="sims")
         dm.setup("fit")
         assert dm.plan.test.sims == (2,)
-        fits.append(dm.fit_linear_ar(LAGS).weights)
+        fits.append(fit_on_training_frames(dm, LAGS).weights)
     assert fits[0] == fits[1]
 
 
@@ -129,12 +129,12 @@ def test_round_trip_and_clear_errors(tmp_path):
     path = write_dataset(tmp_path / "f.h5", data)
     dm = TrajectoryDataModule(path, split="6-4", history_len=4, protocol="sims")
     dm.setup("fit")
-    ar = dm.fit_linear_ar(2)
+    ar = fit_on_training_frames(dm, 2)
     assert LinearAR.from_dict(ar.to_dict()) == ar and ar.n_features == 9
     with pytest.raises(ValueError, match="lags >= 1"):
-        dm.fit_linear_ar(0)
+        fit_on_training_frames(dm, 0)
     with pytest.raises(ValueError, match="too short"):
-        dm.fit_linear_ar(18)
+        fit_on_training_frames(dm, 18)
     batch = next(iter(dm.test_dataloader()))
     short = batch.input_positions[:, :, -2:].transpose(1, 2)
     with pytest.raises(ValueError, match="at least that many"):

@@ -11,6 +11,7 @@ from gripdem.boundary import minimum_image
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.features import step_lattice_shifts
 from gripdem.data.schema import write_dataset
+from gripdem.models.autoregressive import fit_on_training_frames
 from gripdem.models.baselines import constant_velocity
 from gripdem.models.module import TrajectoryModule
 
@@ -185,7 +186,7 @@ def test_ar_prior_starts_at_cv_and_its_open_gate_is_the_ar_baseline(crossing_pat
     heads at zero the model is the linear AR baseline, crossers included (random walks under
     strong shear: AR and CV differ by much more than the tolerance)."""
     dm = _datamodule(crossing_paths[scene], "6-4", 4)
-    ar = dm.fit_linear_ar(2)
+    ar = fit_on_training_frames(dm, 2)
     model = module(dm, mode, "interaction", ar_prior=True, linear_ar=ar.to_dict())
     box = dm.meta.box
     for batch in dm.test_dataloader():

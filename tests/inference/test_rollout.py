@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from gripdem.checkpoint import load_model
 from gripdem.data.schema import read_meta
+from gripdem.inference.checkpoint import load_model
+from gripdem.inference.rollout import rollout
 from gripdem.models.baselines import constant_velocity
-from gripdem.rollout import rollout
 
 
 def observed_window(path, model, start=2):

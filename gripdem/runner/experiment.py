@@ -27,16 +27,16 @@ from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
-from gripdem.checkpoint import data_scene
-from gripdem.config_schema import check_combination
-from gripdem.console import lightning_info_muted, quiet_console
-from gripdem.data.cache import ensure_scene_dataset
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
+from gripdem.dem.output import ensure_scene_dataset
 from gripdem.evaluation.predictions import Predictions, write_predictions
-from gripdem.models.autoregressive import LinearAR
+from gripdem.inference.checkpoint import data_scene
+from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
+from gripdem.runner.config_schema import check_combination
+from gripdem.runner.console import lightning_info_muted, quiet_console
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ def fit_linear_ar(cfg: DictConfig, dm: TrajectoryDataModule) -> LinearAR:
             f"baselines.ar_lags={lags} exceeds the history the windows hold "
             f"(history_len {dm.plan.history_len})"
         )
-    return dm.fit_linear_ar(lags, float(cfg.baselines.ar_ridge))
+    return fit_on_training_frames(dm, lags, float(cfg.baselines.ar_ridge))
 
 
 def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:

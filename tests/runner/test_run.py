@@ -11,8 +11,8 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from gripdem.experiment import HP_METRICS, run_experiment
 from gripdem.run import CONFIG_DIR
+from gripdem.runner.experiment import HP_METRICS, run_experiment
 
 GROUPS = {
     "scene": ["pbc", "lebc"],
@@ -86,14 +86,14 @@ def test_custom_split_and_defaults():
 
 def test_the_interaction_encoder_refuses_the_paper_frame():
     cfg = compose_run(["model=interaction", "model.encoding=sincos"], hydra_node=False)
-    from gripdem.config_schema import check_combination
+    from gripdem.runner.config_schema import check_combination
 
     with pytest.raises(ValueError, match="exact frame"):
         check_combination(cfg)
 
 
 def test_the_ar_prior_refuses_the_paper_frame():
-    from gripdem.config_schema import check_combination
+    from gripdem.runner.config_schema import check_combination
 
     cfg = compose_run(["model=grip_paper", "model.ar_prior=true"], hydra_node=False)
     with pytest.raises(ValueError, match="ar_prior"):

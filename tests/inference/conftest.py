@@ -4,7 +4,7 @@ real Lightning checkpoints of untrained models.
 An untrained model is exactly the constant-velocity (CV) predictor (every learned output starts
 at zero, SPEC §11), which makes rollouts checkable to round-off: a chained rollout of it must
 equal the one-shot CV rollout. The checkpoints are written by a Lightning ``Trainer`` after a
-zero-step ``fit`` of the model :mod:`gripdem.experiment` builds from the smoke preset.
+zero-step ``fit`` of the model :mod:`gripdem.runner.experiment` builds from the smoke preset.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import lightning as L
 import pytest
 from hydra import compose, initialize_config_dir
 
-from gripdem.experiment import build_datamodule, build_model
 from gripdem.run import CONFIG_DIR
+from gripdem.runner.experiment import build_datamodule, build_model
 
 
 def make_checkpoint(data_path: Path, out: Path, overrides: list[str]) -> Path:

@@ -1,0 +1,178 @@
+"""Apply a trained model to a dataset (the work of ``python -m gripdem.predict``): read the
+observed frames, roll the model out (:mod:`gripdem.inference.rollout`), roll every baseline out
+from the same frames, and write the predictions file (where a truth exists), the trajectory as a
+gripdem dataset and the per-frame report (RMSE, divergence checks, in-sample check)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import torch
+
+from gripdem.data.h5io import atomic_write_text
+from gripdem.data.schema import DatasetMeta, TrajectoryData, read_meta, write_dataset
+from gripdem.evaluation.metrics import position_residuals, rmse_per_step
+from gripdem.evaluation.predictions import Predictions, write_predictions
+from gripdem.inference.checkpoint import check_compatible, load_model, training_overlap
+from gripdem.inference.rollout import rollout
+from gripdem.models.baselines import predict_baseline
+
+
+def _read_frames(path: Path, sims: list[int], start: int, stop: int, name="positions"):
+    with h5py.File(path, "r") as h5:
+        return np.stack([np.asarray(h5[name][s, start:stop], np.float64) for s in sims])
+
+
+def _baselines(model, observed, observed_times, target_times, meta: DatasetMeta):
+    """Every baseline of the model rolled out in one go over the target frames:
+    ``name -> (S, n, N, 3)``."""
+    obs = torch.from_numpy(observed)
+    in_off = torch.from_numpy(meta.boundary.offset(observed_times))
+    out_off = torch.from_numpy(meta.boundary.offset(target_times))
+    return {
+        name: predict_baseline(
+            name, obs, in_off, out_off, meta.box, model.profile, model.linear_ar, model.boundary
+        ).numpy()
+        for name in model.baselines
+    }
+
+
+def _per_step(pred, true, times, meta: DatasetMeta) -> list[float]:
+    offsets = meta.boundary.offset(times)
+    res = position_residuals(pred, true, meta.box, offsets)
+    return [float(v) / meta.diameter for v in rmse_per_step(res)]
+
+
+def apply_checkpoint(
+    args: argparse.Namespace, out: Path, traj_path: Path, report_path: Path
+) -> dict[str, Any]:
+    """Apply ``args.checkpoint`` to ``args.data`` as ``python -m gripdem.predict`` does (its
+    options in ``args``), write the predictions, the trajectory and the report; returns the
+    report written to ``report_path``."""
+    data_path = Path(args.data)
+    meta = read_meta(data_path)
+    hp, notes = check_compatible(args.checkpoint, meta)
+    k, f = int(hp["history_len"]), int(hp["horizon"])
+    sims = list(range(meta.n_sims)) if args.sims is None else [int(s) for s in args.sims]
+    bad = [s for s in sims if not 0 <= s < meta.n_sims]
+    if bad:
+        raise ValueError(f"--sims {bad}: {data_path} holds simulations 0..{meta.n_sims - 1}")
+    frames = f if args.frames is None else int(args.frames)
+    if frames < 1:
+        raise ValueError(f"--frames must be >= 1, got {frames}")
+    start = int(args.start)
+    if not 0 <= start <= meta.n_frames - (k + 1):
+        raise ValueError(
+            f"--start {start}: the model reads {k + 1} observed frames (history_len {k}), so "
+            f"the start must lie in 0..{meta.n_frames - k - 1} for {data_path} "
+            f"({meta.n_frames} frames)"
+        )
+    model = load_model(args.checkpoint, meta)
+    with h5py.File(data_path, "r") as h5:
+        all_times = np.asarray(h5["times"][()], np.float64)[sims]
+        radii = np.asarray(h5["radii"][()]) if "radii" in h5 else None
+    observed = _read_frames(data_path, sims, start, start + k + 1)
+    run = rollout(
+        model,
+        meta,
+        observed,
+        all_times[:, start : start + k + 1],
+        frames,
+        args.step,
+        args.overlap_margin,
+        not args.no_overlap,
+        args.device,
+    )
+    first = start + k + 1
+    n_truth = max(0, min(run.n_predicted, meta.n_frames - first))
+    in_sample, protocol, overlap_note = training_overlap(args.checkpoint, data_path, sims, first)
+    notes.append(overlap_note)
+    info = {
+        "checkpoint": str(args.checkpoint),
+        "data": str(data_path),
+        "sims": sims,
+        "start": start,
+        "observed_frames": [start, start + k],
+        "predicted_frames": [first, first + run.n_predicted - 1],
+        "frames_requested": frames,
+        "frames_predicted": run.n_predicted,
+        "truth_frames": n_truth,
+        "history_len": k,
+        "horizon": f,
+        "step": f if args.step is None else int(args.step),
+        "encoding": hp["encoding"],
+        "decoder_mode": hp["decoder_mode"],
+        "encoder": (hp.get("encoder") or {}).get("name", "graph_conv"),
+    }
+    per_step: dict[str, list[float]] = {}
+    if n_truth:
+        true = _read_frames(data_path, sims, first, first + n_truth)
+        times = run.times[:, k + 1 : k + 1 + n_truth]
+        pred = run.predicted[:, :n_truth]
+        baselines = _baselines(model, observed, run.times[:, : k + 1], times, meta)
+        per_step["model"] = _per_step(pred, true, times, meta)
+        for name, values in baselines.items():
+            per_step[name] = _per_step(values, true, times, meta)
+        predictions = Predictions(
+            pred_positions=pred,
+            true_positions=true,
+            last_positions=observed[:, -1],
+            times=times,
+            boundary=meta.boundary,
+            radius=meta.radius,
+            frame_interval=meta.frame_interval,
+            in_sample=in_sample,
+            protocol=protocol,
+            sim_index=np.asarray(sims),
+            window_start=np.full(len(sims), start),
+            baselines=baselines,
+            body_force_amplitude=meta.body_force_amplitude,
+            info=info,
+        )
+        write_predictions(out, predictions, overwrite=args.overwrite)
+    else:
+        notes.append(f"no predicted frame has a truth in {data_path}: {out} not written")
+    trajectory = TrajectoryData(
+        positions=run.positions,
+        times=run.times,
+        boundary=meta.boundary,
+        radius=meta.radius,
+        body_force_amplitude=meta.body_force_amplitude,
+        radii=radii,
+        provenance={
+            "generator": "gripdem.predict",
+            "parameters": {**info, "notes": notes, "source_provenance": meta.provenance},
+        },
+    )
+    write_dataset(traj_path, trajectory, overwrite=args.overwrite)
+    div = run.divergence
+    report = {
+        **info,
+        "in_sample": in_sample,
+        "protocol": protocol,
+        "outputs": {
+            "predictions": str(out) if n_truth else None,
+            "trajectory": str(traj_path),
+        },
+        "frame_interval": meta.frame_interval,
+        "diameter": meta.diameter,
+        "rmse_over_d": per_step,
+        "divergence": {
+            "first": div.first,
+            "stopped": div.stopped,
+            "overlap_start": div.overlap_start,
+            "overlap_margin": args.overlap_margin,
+            "overlap": div.overlap,
+            "max_step_over_d": div.max_step_over_d,
+            "escaped": div.escaped,
+        },
+        "notes": notes,
+    }
+    atomic_write_text(report_path, json.dumps(report, indent=1), overwrite=args.overwrite)
+    report["_divergence_lines"] = div.lines(args.overlap_margin)
+    return report

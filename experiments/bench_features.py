@@ -26,9 +26,10 @@ import numpy as np
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, minimum_image, wrap_positions
 from gripdem.data.datamodule import TrajectoryDataModule
-from gripdem.data.features import ENCODINGS, make_encoding
+from gripdem.data.dataset_io import write_dataset
+from gripdem.data.encodings import ENCODINGS, make_encoding
 from gripdem.data.graph import DEFAULT_ALPHA, build_graph
-from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.data.schema import TrajectoryData
 
 DIAMETER = 2.5e-6
 

@@ -57,8 +57,9 @@ from benchlib import (
 
 from gripdem.boundary import Boundary
 from gripdem.data.batch import collate_windows
-from gripdem.data.datamodule import WindowDataset
-from gripdem.data.schema import TrajectoryData, read_meta, write_dataset
+from gripdem.data.dataset import WindowDataset
+from gripdem.data.dataset_io import read_meta, write_dataset
+from gripdem.data.schema import TrajectoryData
 from gripdem.data.windows import Segment, WindowIndex
 from gripdem.inference.checkpoint import data_scene
 from gripdem.models.module import TrajectoryModule

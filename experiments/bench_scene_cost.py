@@ -39,10 +39,10 @@ from benchlib import fmt, load_yaml, machine_line, markdown_table, scene_dataset
 
 from gripdem.boundary import Boundary, LeesEdwards
 from gripdem.data.batch import collate_windows
-from gripdem.data.datamodule import WindowDataset, _FrameReader
-from gripdem.data.features import x_face_crossings
+from gripdem.data.dataset import FrameReader, WindowDataset
+from gripdem.data.dataset_io import read_meta
+from gripdem.data.encodings import x_face_crossings
 from gripdem.data.graph import build_graph
-from gripdem.data.schema import read_meta
 from gripdem.data.windows import Segment, WindowIndex
 from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig
@@ -159,7 +159,7 @@ def window_parts(model, meta, path: Path, n_windows: int) -> dict:
     """Callables for each data-preparation step and the model, on the data's last simulation."""
     with h5py.File(path, "r") as h5:
         times = np.asarray(h5["times"][()], np.float64)
-    reader = _FrameReader(path)
+    reader = FrameReader(path)
     sim = meta.n_sims - 1
     span = HISTORY + 1 + HORIZON
     count = min(n_windows, (meta.n_frames - span) // HORIZON + 1)

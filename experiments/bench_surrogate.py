@@ -50,7 +50,8 @@ from benchlib import (
 )
 
 from gripdem.boundary import Boundary
-from gripdem.data.schema import TrajectoryData, read_meta, write_dataset
+from gripdem.data.dataset_io import read_meta, write_dataset
+from gripdem.data.schema import TrajectoryData
 from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig
 from gripdem.inference.checkpoint import data_scene

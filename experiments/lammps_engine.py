@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from gripdem.boundary import lattice_continuous_steps, minimum_image
-from gripdem.data.schema import read_dataset
+from gripdem.data.dataset_io import read_dataset
 from gripdem.formats.lammps_dump import read_dump
 from gripdem.formats.lammps_series import AxisMap
 
@@ -133,7 +133,7 @@ def handed_back_energy(lmp: str, work: Path, trajectory: Path, frame: int, name:
 
 def compare_states(lmp: str, work: Path, predicted: Path, truth: Path, frames: list[int]):
     """Hand predicted and true states of the same frames to LAMMPS; print the energies."""
-    from gripdem.data.schema import read_meta
+    from gripdem.data.dataset_io import read_meta
 
     info = read_meta(predicted).provenance["parameters"]
     start, first = info["observed_frames"][0], info["predicted_frames"][0]

@@ -38,8 +38,8 @@ from gripdem.boundary import (
     remove_affine_flow,
     step_start_x,
 )
+from gripdem.data.dataset_io import read_meta
 from gripdem.data.graph import neighbour_pairs
-from gripdem.data.schema import read_meta
 from gripdem.dem.output import ensure_scene_dataset
 
 GAP_BINS = (

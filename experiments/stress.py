@@ -44,7 +44,7 @@ from benchlib import machine_line, markdown_table, scene_dataset, set_threads, t
 
 from gripdem.boundary import minimum_image
 from gripdem.data.batch import collate_windows
-from gripdem.data.schema import read_dataset, read_meta, write_dataset
+from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
 from gripdem.data.units import rescale
 from gripdem.evaluation.metrics import position_residuals, rmse
 from gripdem.inference.checkpoint import load_model

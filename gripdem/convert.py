@@ -9,7 +9,7 @@ Usage::
         [--overwrite]
 
 One subcommand per source format. The
-output is written atomically by :func:`gripdem.data.schema.write_dataset` and an existing file
+output is written atomically by :func:`gripdem.data.dataset_io.write_dataset` and an existing file
 is never replaced without ``--overwrite``. Bad input exits with status 1 and one clear message
 (file, field, expectation), no traceback.
 """
@@ -20,7 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from gripdem.data.schema import write_dataset
+from gripdem.data.dataset_io import write_dataset
 from gripdem.formats.fordatis import DEFAULT_DIAMETER, ImportReport, read_fordatis
 from gripdem.formats.lammps import read_lammps
 

@@ -33,8 +33,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from gripdem.data.dataset_io import read_dataset
 from gripdem.data.h5io import atomic_write_text
-from gripdem.data.schema import read_dataset
 from gripdem.formats.handback import (
     State,
     data_file_text,

@@ -26,7 +26,8 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, wrap_positions
-from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.data.dataset_io import write_dataset
+from gripdem.data.schema import TrajectoryData
 from gripdem.dem.output import ensure_scene_dataset
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"

@@ -25,7 +25,8 @@ from lightning.pytorch.callbacks import Callback
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, minimum_image, wrap_positions
 from gripdem.data.batch import collate_windows
-from gripdem.data.schema import TrajectoryData, read_dataset, write_dataset
+from gripdem.data.dataset_io import read_dataset, write_dataset
+from gripdem.data.schema import TrajectoryData
 from gripdem.data.units import rescale
 from gripdem.dem.engine import Simulation
 from gripdem.dem.params import GeneratorConfig

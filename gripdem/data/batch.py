@@ -21,7 +21,7 @@ class WindowBatch:
     """A batch of windows. ``B`` windows, ``N`` particles, ``K`` history_len, ``f`` horizon,
     ``C`` channels of the encoding, ``T = K + 1 + f`` frames, ``E`` edges of all graphs.
 
-    Encoded arrays are normalised (:class:`~gripdem.data.features.Normalizer` of the
+    Encoded arrays are normalised (:class:`~gripdem.data.encodings.Normalizer` of the
     DataModule) float32; positions, times and LE offsets are float64 (positions are wrapped
     into the box; offsets are the float64 δ of each frame, zeros in a periodic box).
 

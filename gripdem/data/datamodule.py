@@ -1,7 +1,7 @@
 """LightningDataModule over a gripdem HDF5 file: windows, encodings, graphs, batches.
 
 One class serves both scenes (the boundary comes from the file). The file is opened lazily:
-:func:`gripdem.data.schema.read_meta` at ``setup``, positions read per window, one h5py handle
+:func:`gripdem.data.dataset_io.read_meta` at ``setup``, positions read per window, one h5py handle
 per worker process. Batches are :class:`WindowBatch` dataclasses with a ``.to(device)`` method,
 which Lightning's ``transfer_batch_to_device`` calls as it is (and the DataLoader's
 ``pin_memory`` calls ``.pin_memory()``).
@@ -15,7 +15,6 @@ hyperparameters.
 from __future__ import annotations
 
 import os
-from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,19 +22,17 @@ from typing import Any
 import h5py
 import lightning as L
 import numpy as np
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import DataLoader
 
 from gripdem.data.batch import WindowBatch, collate_windows
-from gripdem.data.features import (
-    ENCODINGS,
-    Encoding,
-    Normalizer,
-    make_encoding,
-    x_face_crossings,
-)
-from gripdem.data.graph import DEFAULT_ALPHA, Graph, build_graph
-from gripdem.data.schema import DatasetError, DatasetMeta, read_meta
-from gripdem.data.windows import PARTS, Split, WindowIndex, WindowPlan, plan_windows
+from gripdem.data.dataset import FrameReader, WindowDataset
+from gripdem.data.dataset_io import read_meta
+from gripdem.data.encodings import ENCODINGS, Encoding, make_encoding
+from gripdem.data.graph import DEFAULT_ALPHA
+from gripdem.data.normalizer import Normalizer
+from gripdem.data.protocols import PARTS, WindowPlan, plan_windows
+from gripdem.data.schema import DatasetError, DatasetMeta
+from gripdem.data.windows import Split
 
 __all__ = ["TrajectoryDataModule", "WindowBatch", "WindowDataset", "collate_windows"]
 
@@ -46,115 +43,6 @@ _FIT_CHUNK_FRAMES = 256
 # --------------------------------------------------------------------------------------------
 # the dataset
 # --------------------------------------------------------------------------------------------
-class _FrameReader:
-    """Positions of a gripdem file, read lazily; one h5py handle per process (workers fork)."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        self._h5: h5py.File | None = None
-        self._pid = -1
-
-    def read(self, sim: int, start: int, stop: int) -> np.ndarray:
-        """``(stop-start, N, 3)`` float64 wrapped positions."""
-        if self._h5 is None or self._pid != os.getpid():
-            self._h5 = h5py.File(self.path, "r")
-            self._pid = os.getpid()
-        return np.asarray(self._h5["positions"][sim, start:stop], dtype=np.float64)
-
-    def close(self) -> None:
-        if self._h5 is not None and self._pid == os.getpid():
-            self._h5.close()
-        self._h5 = None
-
-    def __getstate__(self) -> dict:
-        return {"path": self.path, "_h5": None, "_pid": -1}
-
-
-class WindowDataset(Dataset):
-    """Windows of one protocol part, as sample dicts for :func:`collate_windows`.
-
-    The graph depends only on the last observed frame: it is cached per (simulation, frame)
-    in an LRU bounded by ``graph_cache_mb`` (per worker process; 0 = no cache).
-    """
-
-    def __init__(
-        self,
-        reader: _FrameReader,
-        meta: DatasetMeta,
-        times: np.ndarray,
-        windows: WindowIndex,
-        encoding: Encoding,
-        normalizer: Normalizer,
-        graph_cutoff: float,
-        graph_alpha: float = DEFAULT_ALPHA,
-        graph_cache_mb: float = 256.0,
-        in_sample: bool = False,
-    ):
-        self.reader = reader
-        self.meta = meta
-        self.times = times
-        self.offsets = meta.boundary.offset(times)
-        self.windows = windows
-        self.encoding = encoding
-        self.normalizer = normalizer
-        self.graph_cutoff = graph_cutoff
-        self.graph_alpha = graph_alpha
-        self.graph_cache_bytes = graph_cache_mb * 2**20
-        self.in_sample = in_sample
-        self._graphs: OrderedDict[tuple[int, int], Graph] = OrderedDict()
-        self._graph_bytes = 0
-
-    def __len__(self) -> int:
-        return len(self.windows)
-
-    def graph(self, sim: int, frame: int, positions: np.ndarray) -> Graph:
-        key = (sim, frame)
-        if key in self._graphs:
-            self._graphs.move_to_end(key)
-            return self._graphs[key]
-        g = build_graph(
-            positions,
-            self.meta.box,
-            float(self.offsets[sim, frame]),
-            self.graph_cutoff,
-            self.graph_alpha,
-            length_unit=self.meta.diameter,
-        )
-        self._graphs[key] = g
-        self._graph_bytes += g.nbytes
-        while self._graph_bytes > self.graph_cache_bytes and self._graphs:
-            _, old = self._graphs.popitem(last=False)
-            self._graph_bytes -= old.nbytes
-        return g
-
-    def crossing_mask(self, positions: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """``(N,)`` particles that cross an LE face in the target steps of ``positions``
-        ``(N, f+1, 3)``; all False in a periodic box, where no face is special and the mask is
-        never read (skipped: it cost ~8 % of a window's preparation, measured on the tiny scene)."""
-        if not self.meta.boundary.is_lees_edwards:
-            return np.zeros(positions.shape[0], dtype=bool)
-        return x_face_crossings(positions, self.meta.box, offsets)
-
-    def __getitem__(self, index: int) -> dict[str, Any]:
-        w = self.windows[index]
-        k = w.history_len
-        pos = self.reader.read(w.sim, w.start, w.stop).transpose(1, 0, 2)  # (N, T, 3)
-        offs = self.offsets[w.sim, w.start : w.stop]
-        deltas = self.encoding.encode(pos, offs, anchor=k)  # unwrapped: image cell at frame k
-        deltas = self.normalizer.normalize(deltas).astype(np.float32)
-        return {
-            "inputs": np.ascontiguousarray(deltas[:, :k]),
-            "target_deltas": np.ascontiguousarray(deltas[:, k:]),
-            "input_positions": np.ascontiguousarray(pos[:, : k + 1]),
-            "target_positions": np.ascontiguousarray(pos[:, k + 1 :]),
-            "times": self.times[w.sim, w.start : w.stop].copy(),
-            "offsets": offs.copy(),
-            "graph": self.graph(w.sim, w.last_observed, np.ascontiguousarray(pos[:, k])),
-            "crossing_mask": self.crossing_mask(pos[:, k:], offs[k:]),
-            "sim": w.sim,
-            "start": w.start,
-            "in_sample": self.in_sample,
-        }
 
 
 # --------------------------------------------------------------------------------------------
@@ -162,7 +50,7 @@ class WindowDataset(Dataset):
 # --------------------------------------------------------------------------------------------
 class TrajectoryDataModule(L.LightningDataModule):
     """Windows of a gripdem HDF5 file for a split ``h-f`` and a protocol (see
-    :mod:`gripdem.data.windows`), encoded (:mod:`gripdem.data.features`) with the fixed graph
+    :mod:`gripdem.data.windows`), encoded (:mod:`gripdem.data.encodings`) with the fixed graph
     (:mod:`gripdem.data.graph`). Arguments mirror ``conf/data/default.yaml``.
 
     ``graph_cutoff`` is in particle diameters (SPEC §2: D = 3 d). ``expect_boundary``
@@ -228,7 +116,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.normalizer: Normalizer | None = None
         self._restored: Normalizer | None = None
         self.datasets: dict[str, WindowDataset] = {}
-        self._reader: _FrameReader | None = None
+        self._reader: FrameReader | None = None
         self._times: np.ndarray | None = None
 
     @classmethod
@@ -261,7 +149,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.meta = meta
         self.plan = plan_windows(meta.n_sims, meta.n_frames, self.split, **self.plan_args)
         self.encoding = make_encoding(self.encoding_name, meta.boundary)
-        reader = _FrameReader(self.path)
+        reader = FrameReader(self.path)
         self._reader, self._times = reader, times
         if self._restored is not None:
             self.normalizer = self._restored

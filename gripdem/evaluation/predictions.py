@@ -36,15 +36,9 @@ import h5py
 import numpy as np
 
 from gripdem.boundary import Boundary, Box
+from gripdem.data.dataset_io import boundary_from_attrs, read_attr, read_float_attr
 from gripdem.data.h5io import atomic_h5_write
-from gripdem.data.schema import (
-    DatasetError,
-    boundary_from_attrs,
-    check_shape,
-    read_attr,
-    read_float_attr,
-    validate_positions,
-)
+from gripdem.data.schema import DatasetError, check_shape, validate_positions
 
 FORMAT_NAME = "gripdem-predictions"
 FORMAT_VERSION = 1

@@ -14,8 +14,9 @@ import h5py
 import numpy as np
 import torch
 
+from gripdem.data.dataset_io import read_meta, write_dataset
 from gripdem.data.h5io import atomic_write_text
-from gripdem.data.schema import DatasetMeta, TrajectoryData, read_meta, write_dataset
+from gripdem.data.schema import DatasetMeta, TrajectoryData
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.inference.checkpoint import check_compatible, load_model, training_overlap

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from gripdem.data.features import ENCODINGS
+from gripdem.data.encodings import ENCODINGS
 from gripdem.data.schema import DatasetMeta
 
 #: diameter, frame interval and shear rate must agree within this relative tolerance

@@ -32,7 +32,7 @@ import torch
 
 from gripdem.boundary import displacement
 from gripdem.data.batch import collate_windows
-from gripdem.data.datamodule import WindowDataset
+from gripdem.data.dataset import WindowDataset
 from gripdem.data.schema import DatasetMeta
 from gripdem.data.windows import Segment, WindowIndex
 from gripdem.evaluation.physics import overlap_fraction

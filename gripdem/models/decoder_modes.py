@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import torch
 
 from gripdem.boundary import Boundary, lattice_continuous_steps
-from gripdem.data.features import Encoding, Normalizer
+from gripdem.data.encodings import Encoding
+from gripdem.data.normalizer import Normalizer
 
 DECODER_MODES = ("grip", "pct", "vct")
 VCT_SHIFTS = ("learned", "exact")

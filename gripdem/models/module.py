@@ -28,7 +28,8 @@ from gripdem.boundary import (
     remove_affine_flow,
     step_start_x,
 )
-from gripdem.data.features import Normalizer, make_encoding
+from gripdem.data.encodings import make_encoding
+from gripdem.data.normalizer import Normalizer
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step, rmse_split
 from gripdem.models import decoder_modes as modes
 from gripdem.models.autoregressive import LinearAR

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.data.dataset_io import write_dataset
+from gripdem.data.schema import TrajectoryData
 
 
 @pytest.fixture(scope="session")

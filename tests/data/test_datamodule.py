@@ -10,9 +10,11 @@ from omegaconf import OmegaConf
 
 from gripdem.boundary import Box, minimum_image
 from gripdem.data.datamodule import TrajectoryDataModule, WindowBatch, collate_windows
-from gripdem.data.features import Normalizer, make_encoding, x_face_crossings
+from gripdem.data.dataset_io import read_dataset, write_dataset
+from gripdem.data.encodings import make_encoding, x_face_crossings
 from gripdem.data.graph import build_graph
-from gripdem.data.schema import DatasetError, read_dataset, write_dataset
+from gripdem.data.normalizer import Normalizer
+from gripdem.data.schema import DatasetError
 from gripdem.data.windows import SplitError
 
 CONF = Path(__file__).resolve().parents[2] / "conf"

@@ -5,13 +5,8 @@ import pytest
 import torch
 
 from gripdem.boundary import minimum_image, sincos_encode
-from gripdem.data.features import (
-    ENCODINGS,
-    Normalizer,
-    make_encoding,
-    step_lattice_shifts,
-    x_face_crossings,
-)
+from gripdem.data.encodings import ENCODINGS, make_encoding, step_lattice_shifts, x_face_crossings
+from gripdem.data.normalizer import Normalizer
 
 
 def _window(data, sim=0):

@@ -8,13 +8,8 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import Boundary, Box, LeesEdwards
-from gripdem.data.schema import (
-    DatasetError,
-    TrajectoryData,
-    read_dataset,
-    read_meta,
-    write_dataset,
-)
+from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
+from gripdem.data.schema import DatasetError, TrajectoryData
 
 BOX = Box(1.0, 1.2, 0.8)
 

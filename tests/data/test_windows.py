@@ -2,6 +2,7 @@
 
 import pytest
 
+from gripdem.data.protocols import plan_windows
 from gripdem.data.windows import (
     PAPER_SPLITS,
     Segment,
@@ -9,7 +10,6 @@ from gripdem.data.windows import (
     SplitError,
     WindowIndex,
     count_windows,
-    plan_windows,
 )
 
 

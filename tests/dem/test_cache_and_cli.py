@@ -14,7 +14,7 @@ import pytest
 import gripdem.dem.output as output
 import gripdem.dem.scenes as scenes
 from gripdem.data import cache
-from gripdem.data.schema import read_dataset
+from gripdem.data.dataset_io import read_dataset
 from gripdem.dem.validation import report_paths
 from gripdem.simulate import run
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import wrap_positions
-from gripdem.data.schema import read_dataset
+from gripdem.data.dataset_io import read_dataset
 from gripdem.dem.validation import report_paths, validate_trajectories
 
 

@@ -19,7 +19,8 @@ import pytest
 
 from gripdem.boundary import Box, LeesEdwards, wrap_coordinate, wrap_positions
 from gripdem.convert import main
-from gripdem.data.schema import DatasetError, read_dataset
+from gripdem.data.dataset_io import read_dataset
+from gripdem.data.schema import DatasetError
 from gripdem.formats.fordatis import DEFAULT_DIAMETER, read_fordatis
 
 BOX = Box(3.2e-5, 2.8e-5, 3.6e-5)  # not cubic on purpose

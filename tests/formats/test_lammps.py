@@ -17,7 +17,7 @@ import pytest
 
 from gripdem.boundary import Box, LeesEdwards, minimum_image, wrap_into_sheared_cell, wrap_positions
 from gripdem.convert import main
-from gripdem.data.schema import read_dataset
+from gripdem.data.dataset_io import read_dataset
 from gripdem.formats.lammps import read_lammps
 from gripdem.formats.lammps_series import AxisMap
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import Boundary, Box, LeesEdwards
-from gripdem.data.schema import read_dataset, read_meta, write_dataset
+from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
 from gripdem.evaluation.evaluate import evaluate_predictions
 from gripdem.evaluation.predictions import read_predictions
 from gripdem.inference.checkpoint import IncompatibleError, check_compatible, training_overlap

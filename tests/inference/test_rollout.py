@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from gripdem.data.schema import read_meta
+from gripdem.data.dataset_io import read_meta
 from gripdem.inference.checkpoint import load_model
 from gripdem.inference.rollout import rollout
 from gripdem.models.baselines import constant_velocity

@@ -15,8 +15,9 @@ from gripdem.boundary import (
     wrap_positions,
 )
 from gripdem.data.datamodule import TrajectoryDataModule
-from gripdem.data.features import x_face_crossings
-from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.data.dataset_io import write_dataset
+from gripdem.data.encodings import x_face_crossings
+from gripdem.data.schema import TrajectoryData
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 
 BOX = Box(1.0e-5, 1.2e-5, 0.9e-5)

@@ -9,8 +9,8 @@ import torch
 
 from gripdem.boundary import minimum_image
 from gripdem.data.datamodule import TrajectoryDataModule
-from gripdem.data.features import step_lattice_shifts
-from gripdem.data.schema import write_dataset
+from gripdem.data.dataset_io import write_dataset
+from gripdem.data.encodings import step_lattice_shifts
 from gripdem.models.autoregressive import fit_on_training_frames
 from gripdem.models.baselines import constant_velocity
 from gripdem.models.module import TrajectoryModule

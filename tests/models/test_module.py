@@ -9,7 +9,8 @@ import torch
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, wrap_positions
 from gripdem.data.datamodule import TrajectoryDataModule
-from gripdem.data.schema import TrajectoryData, write_dataset
+from gripdem.data.dataset_io import write_dataset
+from gripdem.data.schema import TrajectoryData
 from gripdem.models.module import TrajectoryModule
 
 MODES = [  # (decoder mode, encoding, vct shift, encoder)

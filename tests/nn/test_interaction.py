@@ -7,7 +7,8 @@ import torch
 
 from gripdem.boundary import affine_flow_strain, rewrap_trajectory, unwrap_trajectory
 from gripdem.data.datamodule import TrajectoryDataModule
-from gripdem.data.schema import TrajectoryData, read_dataset, write_dataset
+from gripdem.data.dataset_io import read_dataset, write_dataset
+from gripdem.data.schema import TrajectoryData
 from gripdem.models.module import TrajectoryModule
 from gripdem.nn.interaction import ContactGraph, InteractionEncoder, gap_features
 

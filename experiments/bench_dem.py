@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
 from gripdem.dem.output import generate_dataset
 from gripdem.dem.packing import random_packing
-from gripdem.dem.params import GeneratorConfig
 from gripdem.dem.scenes import initial_velocities, simulate_one
 
 CONF = Path(__file__).resolve().parents[1] / "conf"

@@ -44,8 +44,8 @@ from gripdem.data.dataset_io import read_meta
 from gripdem.data.encodings import x_face_crossings
 from gripdem.data.graph import build_graph
 from gripdem.data.windows import Segment, WindowIndex
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
-from gripdem.dem.params import GeneratorConfig
 from gripdem.inference.checkpoint import data_scene
 from gripdem.models.baselines import predict_baseline
 from gripdem.models.module import TrajectoryModule

@@ -52,8 +52,8 @@ from benchlib import (
 from gripdem.boundary import Boundary
 from gripdem.data.dataset_io import read_meta, write_dataset
 from gripdem.data.schema import TrajectoryData
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
-from gripdem.dem.params import GeneratorConfig
 from gripdem.inference.checkpoint import data_scene
 from gripdem.inference.rollout import rollout
 from gripdem.models.module import TrajectoryModule

@@ -54,8 +54,8 @@ from omegaconf import OmegaConf  # noqa: E402
 
 from gripdem.data.batch import collate_windows  # noqa: E402
 from gripdem.data.datamodule import TrajectoryDataModule  # noqa: E402
+from gripdem.dem.config import GeneratorConfig  # noqa: E402
 from gripdem.dem.engine import Simulation  # noqa: E402
-from gripdem.dem.params import GeneratorConfig  # noqa: E402
 from gripdem.evaluation.metrics import position_residuals, rmse  # noqa: E402
 from gripdem.models.autoregressive import fit_on_training_frames
 from gripdem.models.module import TrajectoryModule  # noqa: E402

@@ -17,8 +17,8 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.output import ensure_scene_dataset, generate_dataset
-from gripdem.dem.params import GeneratorConfig
 from gripdem.dem.validation import report_paths
 
 log = logging.getLogger(__name__)

@@ -28,8 +28,8 @@ from gripdem.data.batch import collate_windows
 from gripdem.data.dataset_io import read_dataset, write_dataset
 from gripdem.data.schema import TrajectoryData
 from gripdem.data.units import rescale
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
-from gripdem.dem.params import GeneratorConfig
 from gripdem.dem.scenes import simulate_one
 from gripdem.evaluation.metrics import position_residuals, rmse
 from gripdem.models.baselines import constant_velocity

@@ -20,8 +20,9 @@ import torch
 
 from gripdem.boundary import wrap_positions
 from gripdem.dem import forces_numba, forces_torch
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.neighbours import PairList, build_pairs, transfer_history
-from gripdem.dem.params import SOLID_SPHERE_INERTIA, GeneratorConfig
+from gripdem.dem.params import SOLID_SPHERE_INERTIA
 
 
 class Simulation:

@@ -20,7 +20,7 @@ with ``n_x * shear_rate * lx`` along z: SPEC §9), ``v_n = v . n`` (< 0 approach
   drag ``-8 pi mu r^3 (w - (0, -shear_rate/2, 0))``; body force ``m a cos(2 pi x / lx) e_z``.
 
 A term whose coefficient is zero is skipped. Constants come from the packed array of
-:meth:`gripdem.dem.params.GeneratorConfig.force_law`.
+:meth:`gripdem.dem.config.GeneratorConfig.force_law`.
 """
 
 from __future__ import annotations

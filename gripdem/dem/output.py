@@ -14,7 +14,8 @@ from typing import Any
 
 from gripdem.data.cache import cached_file, content_key, data_root
 from gripdem.data.dataset_io import write_dataset
-from gripdem.dem.params import GENERATOR_VERSION, GeneratorConfig
+from gripdem.dem.config import GeneratorConfig
+from gripdem.dem.params import GENERATOR_VERSION
 from gripdem.dem.scenes import generate
 from gripdem.dem.validation import validate_trajectories, write_report
 

@@ -23,9 +23,10 @@ from tqdm.auto import tqdm
 
 import gripdem
 from gripdem.data.schema import TrajectoryData
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
 from gripdem.dem.packing import random_packing
-from gripdem.dem.params import GENERATOR_NAME, GENERATOR_VERSION, GeneratorConfig
+from gripdem.dem.params import GENERATOR_NAME, GENERATOR_VERSION
 
 #: an overlap above this fraction of the diameter in any step means contacts pass through each
 #: other: the step is too large for the stiffness (the refusal in GeneratorConfig covers equal

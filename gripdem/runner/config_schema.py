@@ -5,7 +5,7 @@ Registered in Hydra's ConfigStore as ``config_schema`` and listed first in
 command-line override while composing: an unknown key, a wrong type (``split.horizon=ten``)
 or a value outside a fixed set (``model.decoder_mode=gripp``) fails before anything runs,
 with a message naming the key and what was expected. Scene physics and preset sizes are
-checked by :class:`gripdem.dem.params.GeneratorConfig`; trainer arguments by Lightning.
+checked by :class:`gripdem.dem.config.GeneratorConfig`; trainer arguments by Lightning.
 
 Scene x model specifics live in :func:`check_combination` (the one place for them).
 """

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from gripdem.dem import forces_numba, forces_torch
-from gripdem.dem.params import GeneratorConfig
+from gripdem.dem.config import GeneratorConfig
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
 

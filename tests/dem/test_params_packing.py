@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from gripdem.boundary import minimum_image
+from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.neighbours import build_pairs
 from gripdem.dem.packing import random_packing
-from gripdem.dem.params import LAW_SIZE, GeneratorConfig
+from gripdem.dem.params import LAW_SIZE
 
 D = 2.5e-6
 

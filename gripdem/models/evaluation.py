@@ -1,0 +1,135 @@
+"""Validation and test of a trajectory model: roll out over the horizon, decode to wrapped
+Cartesian positions, score with the LE-aware RMSE (:mod:`gripdem.evaluation.metrics`) beside
+every baseline on the same windows, and log the stage's metrics. The best checkpoint is chosen on
+``val/rmse`` (the rollout), not on the training loss.
+
+:class:`RolloutEvaluation` is a mixin of :class:`gripdem.models.module.TrajectoryModule`: it reads
+the module's ``boundary``, ``diameter``, ``profile``, ``linear_ar``, ``baselines`` and its
+``forward`` / ``decode`` / ``_loss``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from gripdem.evaluation.metrics import position_residuals, rmse_per_step, rmse_split
+from gripdem.models.baselines import predict_baseline
+
+
+class RolloutEvaluation:
+    """Validation/test steps and epoch ends of the trajectory module (see the module doc)."""
+
+    def predict_baselines(self, batch) -> dict[str, torch.Tensor]:
+        """Every baseline's wrapped positions ``(B, f, N, 3)`` on the batch's windows."""
+        observed = batch.input_positions.double().transpose(1, 2)
+        in_off = batch.input_offsets.double()
+        out_off = batch.target_offsets.double()
+        box = self.boundary.box
+        return {
+            name: predict_baseline(
+                name, observed, in_off, out_off, box, self.profile, self.linear_ar, self.boundary
+            )
+            for name in self.baselines
+        }
+
+    def _evaluate(self, batch, stage: str) -> None:
+        pred = self(batch)
+        loss = self._loss(pred, batch)
+        positions = self.decode(pred, batch)
+        if not torch.isfinite(positions).all():
+            raise FloatingPointError(
+                f"non-finite predicted positions in {stage} at global step {self.global_step}"
+            )
+        store = self._eval_store.setdefault(stage, [])
+        target = batch.target_positions.double().transpose(1, 2)
+        offsets = batch.target_offsets.double() if self.boundary.is_lees_edwards else None
+        record = {
+            "loss": float(loss),
+            "n": batch.inputs.shape[0],
+            "pred": positions.detach().cpu(),
+            "true": target.cpu(),
+            "last": batch.last_positions.double().cpu(),
+            "offsets": None if offsets is None else offsets.cpu(),
+            "times": batch.target_times.double().cpu(),
+            "mask": batch.crossing_mask.cpu().numpy(),
+            "sim_index": batch.sim_index.cpu(),
+            "window_start": batch.window_start.cpu(),
+        }
+        record.update({k: v.cpu() for k, v in self.predict_baselines(batch).items()})
+        store.append(record)
+
+    def validation_step(self, batch, batch_idx: int) -> None:
+        self._evaluate(batch, "val")
+
+    def test_step(self, batch, batch_idx: int) -> None:
+        self._evaluate(batch, "test")
+
+    def _collected(self, stage: str) -> dict[str, Any]:
+        records = self._eval_store.pop(stage, [])
+        if not records:
+            return {}
+        out: dict[str, Any] = {}
+        keys = ("pred", "true", "last", "times", "sim_index", "window_start", *self.baselines)
+        for key in keys:
+            out[key] = torch.cat([r[key] for r in records])
+        out["offsets"] = (
+            None if records[0]["offsets"] is None else torch.cat([r["offsets"] for r in records])
+        )
+        out["mask"] = np.concatenate([r["mask"] for r in records])
+        total = sum(r["n"] for r in records)
+        out["loss"] = sum(r["loss"] * r["n"] for r in records) / total
+        return out
+
+    def stage_metrics(self, stage: str, data: dict[str, Any]) -> dict[str, float]:
+        """All scalar metrics of a stage from the collected rollouts."""
+        box = self.boundary.box
+        metrics = {f"{stage}/loss": data["loss"]}
+
+        def score(pred, prefix: str) -> np.ndarray:
+            res = position_residuals(pred, data["true"], box, data["offsets"])
+            per_step = rmse_per_step(res)
+            total = float(np.sqrt(np.mean(per_step**2)))
+            metrics[f"{stage}/{prefix}"] = total
+            metrics[f"{stage}/{prefix}_over_d"] = total / self.diameter
+            if self.boundary.is_lees_edwards:
+                crossers, others, count = rmse_split(res, data["mask"])
+                metrics[f"{stage}/{prefix}_crossers"] = crossers
+                metrics[f"{stage}/{prefix}_others"] = others
+                metrics[f"{stage}/n_crossers"] = float(count)
+            return per_step
+
+        per_step = score(data["pred"], "rmse")
+        for step, value in enumerate(per_step, start=1):
+            metrics[f"{stage}/rmse_step/{step:03d}"] = float(value)
+        for name in self.baselines:
+            score(data[name], f"rmse_{name}")
+            metrics[f"{stage}/rmse_ratio_{name}"] = (
+                metrics[f"{stage}/rmse"] / metrics[f"{stage}/rmse_{name}"]
+            )
+        return metrics
+
+    def _end_of_eval(self, stage: str) -> dict[str, Any]:
+        data = self._collected(stage)
+        if not data:
+            return {}
+        metrics = self.stage_metrics(stage, data)
+        for key, value in metrics.items():
+            if not math.isnan(value):
+                self.log(key, value, prog_bar=key == f"{stage}/rmse", sync_dist=True)
+        data["metrics"] = metrics
+        return data
+
+    def on_validation_epoch_end(self) -> None:
+        data = self._end_of_eval("val")
+        if data and self._fit_started is not None and not self.trainer.sanity_checking:
+            seconds = time.perf_counter() - self._fit_started
+            ratio = data["metrics"]["val/rmse_ratio_constant_velocity"]
+            self.accuracy_curve.append((seconds, int(self.global_step), float(ratio)))
+
+    def on_test_epoch_end(self) -> None:
+        self.test_results = self._end_of_eval("test")

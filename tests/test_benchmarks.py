@@ -13,7 +13,8 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture
 def run_script(run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
-    """``run_script(name, *args) -> stdout`` of ``python experiments/<name>.py --quick``."""
+    """``run_script(name, *args) -> stdout`` of ``python experiments/<name>.py --quick``
+    (name: e.g. ``benchmarks/scaling``)."""
 
     def run(name: str, *args: str) -> str:
         proc = run_experiment_quick(name, *args)
@@ -25,7 +26,7 @@ def run_script(run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
 
 
 def test_time_vs_error_quick(run_script, tmp_path):
-    out = run_script("bench_time_vs_error", "--out-dir", str(tmp_path))
+    out = run_script("benchmarks/time_vs_error", "--out-dir", str(tmp_path))
     assert "| DEM solver" in out and "| constant_velocity |" in out
     assert (tmp_path / "pareto_time_vs_error.png").stat().st_size > 0
     report = json.loads((tmp_path / "time_vs_error.json").read_text())
@@ -40,7 +41,7 @@ def test_time_vs_error_quick(run_script, tmp_path):
 
 
 def test_surrogate_quick(run_script, tmp_path):
-    out = run_script("bench_surrogate", "--json", str(tmp_path / "s.json"))
+    out = run_script("benchmarks/surrogate_speed", "--json", str(tmp_path / "s.json"))
     report = json.loads((tmp_path / "s.json").read_text())
     assert {(r["scene"], r["particles"]) for r in report["rows"]} == {
         (s, n) for s in ("pbc", "lebc") for n in (400, 1600)
@@ -49,7 +50,7 @@ def test_surrogate_quick(run_script, tmp_path):
 
 
 def test_scaling_quick(run_script, tmp_path):
-    run_script("bench_scaling", "--json", str(tmp_path / "s.json"))
+    run_script("benchmarks/scaling", "--json", str(tmp_path / "s.json"))
     rows = json.loads((tmp_path / "s.json").read_text())["rows"]
     forms = {r["op"] for r in rows if "seconds" in r}
     assert forms == {"sparse", "dense", "interaction"}
@@ -57,7 +58,7 @@ def test_scaling_quick(run_script, tmp_path):
 
 
 def test_scene_cost_quick(run_script, tmp_path):
-    run_script("bench_scene_cost", "--json", str(tmp_path / "s.json"))
+    run_script("benchmarks/scene_cost", "--json", str(tmp_path / "s.json"))
     report = json.loads((tmp_path / "s.json").read_text())
     assert report["le_path_difference"] < 1e-12  # the LE path predicts the same positions
     assert [row[0] for row in report["dem"]][:3] == ["pbc", "lebc", "pbc via the LE path"]

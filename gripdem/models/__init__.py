@@ -1,1 +1,6 @@
-"""LightningModules (GRIP++, PCT, VCT from one class) and the baselines they are compared with."""
+"""The models: one LightningModule for GRIP++, PCT and VCT (and the interaction-aware default),
+whose decoder mode and encoder come from config; how each decoder mode feeds, advances, decodes
+and trains the GRU; the validation and test steps that score rollouts beside the baselines; and
+the baselines themselves (stay, constant velocity, the linear autoregressive filter, the
+mean-flow profile).
+"""

@@ -1,1 +1,5 @@
-"""Neural building blocks: sparse graph-conv encoder and seq2seq GRU trajectory decoder."""
+"""Neural building blocks with documented tensor shapes: the paper's sparse graph-convolution
+encoder, the interaction-aware message-passing encoder (pair messages from relative geometry and
+motion), and the seq2seq GRU trajectory decoder. Plain ``torch.nn`` modules that know nothing of
+files, boundaries or Lightning.
+"""

@@ -10,117 +10,29 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import tarfile
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from fordatis_files import (
+    BOX,
+    DT,
+    SHEAR,
+    T_START,
+    D,
+    assert_same_positions,
+    by_id,
+    le_archive,
+    make_trajectory,
+    write_archive,
+    write_h5,
+)
 
-from gripdem.boundary import Box, LeesEdwards, wrap_coordinate, wrap_positions
+from gripdem.boundary import LeesEdwards, wrap_coordinate
 from gripdem.convert import main
 from gripdem.data.dataset_io import read_dataset
 from gripdem.data.schema import DatasetError
-from gripdem.formats.fordatis import DEFAULT_DIAMETER, read_fordatis
-
-BOX = Box(3.2e-5, 2.8e-5, 3.6e-5)  # not cubic on purpose
-D = DEFAULT_DIAMETER
-SHEAR = 1000.0
-DT = 5e-6
-T_START = 1.1e-3  # absolute frame times, as in the authors' data
-
-
-# --------------------------------------------------------------------------------------------
-# writing the authors' layout
-# --------------------------------------------------------------------------------------------
-def make_trajectory(
-    seed, n=80, frames=40, sign=None, time_origin=0.0, t_start=T_START, x_band=None, vx=0.02
-):
-    """Wrapped positions ``(frames, n, 3)`` (centred box), times ``(frames,)``, identifiers.
-
-    sign=None: periodic. Particle i has identifier ids[i]; x moves at a constant velocity (up
-    to ``vx*lx`` per frame, so particles cross the x faces) plus noise.
-    """
-    rng = np.random.default_rng(seed)
-    times = t_start + DT * np.arange(frames)
-    cont = np.empty((frames, n, 3))
-    cont[0] = (rng.random((n, 3)) - 0.5) * BOX.lengths
-    if x_band is not None:
-        cont[0, :, 0] *= x_band
-    step = np.zeros((n, 3))
-    step[:, 0] = rng.uniform(-vx, vx, n) * BOX.lx
-    for f in range(1, frames):
-        noise = rng.normal(0.0, 2e-3 * D, (n, 3))
-        flow = 0.0 if sign is None else sign * SHEAR * cont[f - 1, :, 0] * DT
-        cont[f] = cont[f - 1] + step + noise
-        cont[f, :, 2] += flow
-    if sign is None:
-        wrapped = wrap_positions(cont, BOX)
-    else:
-        offsets = LeesEdwards(SHEAR, sign, time_origin).offset(BOX, times)
-        wrapped = wrap_positions(cont, BOX, offsets[:, None])
-    ids = rng.permutation(n) + 7
-    return wrapped, times, ids
-
-
-def write_h5(
-    path,
-    positions,
-    times,
-    ids,
-    *,
-    centre=(0.0, 0.0, 0.0),
-    first_step=0,
-    time_scalar=False,
-    seed=0,
-    edit=None,
-):
-    """Write one file in the authors' layout; particles shuffled anew in every frame.
-
-    edit(f, group) may change frame f after it is written (bad-input tests)."""
-    rng = np.random.default_rng(seed)
-    centre = np.asarray(centre)
-    with h5py.File(path, "w") as h5:
-        for f, t in enumerate(times):
-            group = h5.create_group(f"Step#{first_step + f}")
-            group.attrs["Time"] = float(t) if time_scalar else np.array([t])
-            group.attrs["Lower"] = -0.5 * BOX.lengths + centre
-            group.attrs["Upper"] = 0.5 * BOX.lengths + centre
-            order = rng.permutation(len(ids))
-            group["Identifier"] = ids[order].astype(np.int64)
-            for axis in range(3):
-                group[f"Coords_{axis}"] = positions[f, order, axis] + centre[axis]
-            if edit is not None:
-                edit(f, group)
-    return path
-
-
-def write_archive(path, files: dict[str, Path]):
-    with tarfile.open(path, "w:gz") as tar:
-        for name, file in files.items():
-            tar.add(file, arcname=name)
-    return path
-
-
-def by_id(positions, ids):
-    """Truth in the importer's order (ascending identifier)."""
-    return positions[:, np.argsort(ids)]
-
-
-def assert_same_positions(got, want, box=BOX):
-    """Equal modulo the box (a coordinate at -l/2 may come back as -l/2 or +l/2 - eps)."""
-    diff = got - want
-    for axis, length in enumerate(box.lengths):
-        np.testing.assert_allclose(wrap_coordinate(diff[..., axis], length), 0.0, atol=1e-12)
-
-
-def le_archive(tmp_path, sign, time_origin=0.0, files=2, **kw):
-    members, truths = {}, []
-    for i in range(files):
-        pos, times, ids = make_trajectory(10 + i, sign=sign, time_origin=time_origin, **kw)
-        members[f"lebc/run{i}.h5"] = write_h5(tmp_path / f"le{i}.h5", pos, times, ids, seed=i)
-        truths.append((pos, times, ids))
-    return write_archive(tmp_path / "le.tar.gz", members), truths
+from gripdem.formats.fordatis import read_fordatis
 
 
 # --------------------------------------------------------------------------------------------
@@ -258,151 +170,6 @@ def test_le_given_time_origin_is_verified(tmp_path):
     assert "0 s (given)" in report.evidence.origin
     with pytest.raises(DatasetError, match=r"the crossers put the time origin at .*--time-origin"):
         read_fordatis(archive, shear_rate=SHEAR, time_origin=2 * DT)
-
-
-# --------------------------------------------------------------------------------------------
-# bad input: each message names the file and the group/field
-# --------------------------------------------------------------------------------------------
-def _bad(tmp_path, edit=None, frames=8, **kw):
-    pos, times, ids = make_trajectory(8, frames=frames)
-    return write_h5(tmp_path / "bad.h5", pos, times, ids, edit=edit, **kw)
-
-
-def _drop(name):
-    def edit(f, group):
-        if f == 3:
-            del group[name]
-
-    return edit
-
-
-def test_bad_member_in_archive(tmp_path):
-    pos, times, ids = make_trajectory(1, frames=6)
-    good = write_h5(tmp_path / "good.h5", pos, times, ids)
-    notes = tmp_path / "notes.txt"
-    notes.write_text("not hdf5")
-    archive = write_archive(tmp_path / "a.tar.gz", {"good.h5": good, "data/notes.txt": notes})
-    with pytest.raises(DatasetError, match=r"a\.tar\.gz\[data/notes\.txt\].*expected an HDF5"):
-        read_fordatis(archive)
-
-
-def test_truncated_archive(tmp_path):
-    pos, times, ids = make_trajectory(1, frames=30)
-    archive = write_archive(
-        tmp_path / "a.tar.gz", {"x.h5": write_h5(tmp_path / "x.h5", pos, times, ids)}
-    )
-    cut = tmp_path / "cut.tar.gz"
-    cut.write_bytes(archive.read_bytes()[: archive.stat().st_size // 2])
-    with pytest.raises(DatasetError, match=r"cut\.tar\.gz.*unreadable archive"):
-        read_fordatis(cut)
-
-
-def test_not_hdf5_nor_tar(tmp_path):
-    path = tmp_path / "x.h5"
-    path.write_text("hello")
-    with pytest.raises(DatasetError, match=r"x\.h5.*expected one HDF5 file or a tar archive"):
-        read_fordatis(path)
-
-
-def test_missing_identifier(tmp_path):
-    with pytest.raises(DatasetError, match=r"bad\.h5: field 'Step#3/Identifier': missing dataset"):
-        read_fordatis(_bad(tmp_path, _drop("Identifier")))
-
-
-def test_missing_coords_and_attr(tmp_path):
-    with pytest.raises(DatasetError, match=r"'Step#3/Coords_2': missing dataset"):
-        read_fordatis(_bad(tmp_path, _drop("Coords_2")))
-
-    def no_time(f, group):
-        if f == 2:
-            del group.attrs["Time"]
-
-    with pytest.raises(DatasetError, match=r"'Step#2 attr Time': missing attribute"):
-        read_fordatis(_bad(tmp_path, no_time))
-
-
-def test_duplicate_identifiers(tmp_path):
-    def dup(f, group):
-        if f == 4:
-            ids = group["Identifier"][()]
-            ids[1] = ids[0]
-            group["Identifier"][...] = ids
-
-    with pytest.raises(DatasetError, match=r"bad\.h5: field 'Step#4/Identifier'.*duplicated"):
-        read_fordatis(_bad(tmp_path, dup))
-
-
-def test_identifier_set_changes(tmp_path):
-    def renumber(f, group):
-        if f == 5:
-            ids = group["Identifier"][()]
-            ids[ids == 7] = 10_000
-            group["Identifier"][...] = ids
-
-    with pytest.raises(
-        DatasetError,
-        match=r"'Step#5/Identifier': expected the same particles as Step#0.*"
-        r"missing \[7\], new \[10000\]",
-    ):
-        read_fordatis(_bad(tmp_path, renumber))
-
-
-def test_moving_box(tmp_path):
-    def move(f, group):
-        if f == 6:
-            group.attrs["Upper"] = group.attrs["Upper"] * 1.01
-
-    with pytest.raises(DatasetError, match=r"bad\.h5: field 'Step#6 attr Upper'.*moving"):
-        read_fordatis(_bad(tmp_path, move))
-
-
-def test_step_gap(tmp_path):
-    path = _bad(tmp_path)
-    with h5py.File(path, "a") as h5:
-        del h5["Step#4"]
-    with pytest.raises(
-        DatasetError, match=r"bad\.h5: field 'Step#4'.*Step#3 is followed by Step#5"
-    ):
-        read_fordatis(path)
-
-
-def test_non_equidistant_times(tmp_path):
-    def late(f, group):
-        if f == 5:
-            group.attrs["Time"] = group.attrs["Time"] + 0.01 * DT
-
-    with pytest.raises(DatasetError, match=r"'Step#5 attr Time': expected equidistant frames"):
-        read_fordatis(_bad(tmp_path, late))
-
-
-def test_non_finite_coordinates(tmp_path):
-    def nan(f, group):
-        if f == 1:
-            group["Coords_1"][0] = np.nan
-
-    with pytest.raises(DatasetError, match=r"'Step#1/Coords_1': expected finite"):
-        read_fordatis(_bad(tmp_path, nan))
-
-
-def test_files_disagree_on_particle_count(tmp_path):
-    a = make_trajectory(1, frames=6)
-    b = make_trajectory(2, frames=6, n=79)
-    archive = write_archive(
-        tmp_path / "x.tar.gz",
-        {"a.h5": write_h5(tmp_path / "a.h5", *a), "b.h5": write_h5(tmp_path / "b.h5", *b)},
-    )
-    with pytest.raises(DatasetError, match=r"x\.tar\.gz\[b\.h5\]: field 'Identifier': expected 80"):
-        read_fordatis(archive)
-
-
-def test_bad_options(tmp_path):
-    path = _bad(tmp_path)
-    with pytest.raises(ValueError, match="above random close packing"):
-        read_fordatis(path, diameter=2 * D * 4)
-    with pytest.raises(ValueError, match="dropping 7 leaves fewer than.*--drop-frames"):
-        read_fordatis(path, drop_frames=7)
-    with pytest.raises(ValueError, match="give --shear-rate"):
-        read_fordatis(path, le_sign=1)
 
 
 # --------------------------------------------------------------------------------------------

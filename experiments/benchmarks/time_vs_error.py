@@ -1,8 +1,8 @@
 """Run time against error: trained models vs the DEM solver vs the baselines, per scene and split.
 
-    python experiments/bench_time_vs_error.py RUN_OR_SWEEP_DIR... [--dem-frames N]
+    python experiments/benchmarks/time_vs_error.py RUN_OR_SWEEP_DIR... [--dem-frames N]
         [--windows N] [--threads 1] [--out-dir experiments/results]
-    python experiments/bench_time_vs_error.py --quick          # trains two smoke models first
+    python experiments/benchmarks/time_vs_error.py --quick          # trains two smoke models first
 
 Every ``RUN_OR_SWEEP_DIR`` is a ``python -m gripdem.run`` output directory (``metrics.json``,
 ``checkpoints/best.ckpt``, ``.hydra/config.yaml``) or a folder holding such directories (a
@@ -35,85 +35,32 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import h5py
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from benchlib import fmt, machine_line, markdown_table, set_threads, train_run  # noqa: E402
+from benchlib import machine_line, set_threads, train_run  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
+from time_vs_error_report import Row, break_even, plot, replot, table
+from time_vs_error_timing import (
+    Run,
+    data_seconds,
+    dem_seconds_per_frame,
+    read_seconds,
+    rmse_over_d,
+    test_windows,
+    time_baseline,
+    time_model,
+)
 
-from gripdem.data.batch import collate_windows  # noqa: E402
-from gripdem.data.datamodule import TrajectoryDataModule  # noqa: E402
-from gripdem.dem.config import GeneratorConfig  # noqa: E402
-from gripdem.dem.engine import Simulation  # noqa: E402
-from gripdem.evaluation.metrics import position_residuals, rmse  # noqa: E402
 from gripdem.models.autoregressive import fit_on_training_frames
 from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 BASELINE_NAMES = ("stay", "constant_velocity", "mean_flow", "linear_ar")
-
-
-@dataclass
-class Run:
-    """One trained run: its folder, composed config, metrics and a label."""
-
-    path: Path
-    cfg: object
-    metrics: dict
-    preset: str
-
-    @property
-    def scene(self) -> str:
-        return str(self.cfg.scene.name)
-
-    @property
-    def split(self) -> str:
-        return str(self.cfg.split.name)
-
-    @property
-    def label(self) -> str:
-        return f"{self.metrics['hparams']['model']} ({self.preset}, seed {self.cfg.seed})"
-
-    @property
-    def checkpoint(self) -> Path:
-        return self.path / "checkpoints" / "best.ckpt"
-
-    @property
-    def data_path(self) -> Path:
-        return Path(self.metrics["data"]["path"])
-
-
-@dataclass
-class Row:
-    """One line of a table: a method's times (s) on all test windows and its error."""
-
-    method: str
-    kind: str  # dem | model | baseline
-    prep_s: float
-    predict_s: float
-    frames: int
-    rmse_over_d: float
-    train_s: float | None = None
-    data_s: float | None = None
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def total_s(self) -> float:
-        return self.prep_s + self.predict_s
-
-    @property
-    def per_frame_s(self) -> float:
-        return self.total_s / self.frames
 
 
 # --------------------------------------------------------------------------------------------
@@ -163,117 +110,6 @@ def train_smoke_runs(out: Path, scenes: list[str]) -> list[Path]:
 # --------------------------------------------------------------------------------------------
 # timing
 # --------------------------------------------------------------------------------------------
-def test_windows(run: Run, model: TrajectoryModule):
-    """The run's test windows (rebuilt from its config, its own normaliser; graphs never
-    cached, so every window pays for its graph)."""
-    dm = TrajectoryDataModule.from_config(
-        run.cfg.data, run.cfg.split, path=str(run.data_path), graph_cache_mb=0.0
-    )
-    dm.load_state_dict({"normalizer": model.normalizer.to_dict(), "encoding": dm.encoding_name})
-    dm.setup("fit")
-    return dm
-
-
-@torch.no_grad()
-def time_model(model: TrajectoryModule, dataset, n: int) -> tuple[float, float, list, list]:
-    """(prep s, predict s, batches, predicted positions) over the first ``n`` windows."""
-    warm = collate_windows([dataset[0]])
-    model.decode(model(warm), warm)  # first call: lazy initialisation, not timed
-    prep = predict = 0.0
-    batches, preds = [], []
-    for i in range(n):
-        start = time.perf_counter()
-        batch = collate_windows([dataset[i]])
-        mid = time.perf_counter()
-        positions = model.decode(model(batch), batch)
-        predict += time.perf_counter() - mid
-        prep += mid - start
-        batches.append(batch)
-        preds.append(positions)
-    return prep, predict, batches, preds
-
-
-def time_baseline(model: TrajectoryModule, name: str, batches: list) -> tuple[float, list]:
-    """(s, predictions) of one baseline on the already read windows."""
-    from gripdem.models.baselines import predict_baseline
-
-    box, out = model.boundary.box, []
-    start = time.perf_counter()
-    for b in batches:
-        observed = b.input_positions.double().transpose(1, 2)
-        out.append(
-            predict_baseline(
-                name,
-                observed,
-                b.input_offsets.double(),
-                b.target_offsets.double(),
-                box,
-                model.profile,
-                model.linear_ar,
-                model.boundary,
-            )
-        )
-    return time.perf_counter() - start, out
-
-
-def read_seconds(dataset, n: int) -> float:
-    """HDF5 read of the first ``n`` windows' frames (what a baseline needs as input)."""
-    start = time.perf_counter()
-    for i in range(n):
-        w = dataset.windows[i]
-        dataset.reader.read(w.sim, w.start, w.stop)
-    return time.perf_counter() - start
-
-
-def rmse_over_d(preds: list, batches: list, model: TrajectoryModule) -> float:
-    pred = torch.cat(preds)
-    true = torch.cat([b.target_positions.double().transpose(1, 2) for b in batches])
-    offsets = torch.cat([b.target_offsets.double() for b in batches])
-    offsets = offsets if model.boundary.is_lees_edwards else None
-    return rmse(position_residuals(pred, true, model.boundary.box, offsets)) / model.diameter
-
-
-def dem_seconds_per_frame(data_path: Path, sim: int, frame: int, frames: int) -> dict:
-    """The built-in DEM restarted from a stored frame of ``data_path``, timed over ``frames``
-    frames (after one untimed step: numba's cached kernels load on first use)."""
-    with h5py.File(data_path, "r") as h5:
-        params = json.loads(h5.attrs["provenance"])["parameters"]
-        positions = np.asarray(h5["positions"][sim, frame], np.float64)
-        velocities = np.asarray(h5["velocities"][sim, frame], np.float64)
-        t = float(h5["times"][sim, frame])
-    config = GeneratorConfig.from_mappings(params["scene"], params["preset"], sims=1)
-    sim_ = Simulation(config, positions, velocities, step=round(t / config.dt))
-    sim_.run(1)
-    start = time.perf_counter()
-    for _ in range(frames):
-        sim_.run(config.steps_per_frame)
-    wall = time.perf_counter() - start
-    return {
-        "s_per_frame": wall / frames,
-        "frames_timed": frames,
-        "dt": config.dt,
-        "steps_per_frame": config.steps_per_frame,
-        "max_overlap_d": sim_.max_overlap,
-    }
-
-
-def data_seconds(run: Run, parts: tuple[str, ...]) -> float | None:
-    """DEM wall time (dataset provenance) that generated the run's simulations of ``parts``
-    (``sims_train``, ``sims_val``); None when not recorded or not split by simulation."""
-    with h5py.File(run.data_path, "r") as h5:
-        walls = json.loads(h5.attrs["provenance"]).get("wall_time_s")
-    summary = run.metrics["data"]
-    if not walls or any(part not in summary for part in parts):
-        return None
-    return float(sum(walls[s] for part in parts for s in summary[part]))
-
-
-def break_even(train_s: float | None, per_frame: float, dem_per_frame: float) -> float:
-    """Predicted frames after which ``train_s`` is paid back (inf: never)."""
-    if train_s is None:
-        return math.nan
-    gain = dem_per_frame - per_frame
-    return train_s / gain if gain > 0 else math.inf
 
 
 # --------------------------------------------------------------------------------------------
@@ -328,119 +164,6 @@ def evaluate_run(run: Run, n_windows: int | None, with_baselines: bool) -> tuple
             )
     dm.teardown()
     return rows, info
-
-
-def table(rows: list[Row], dem: Row) -> str:
-    headers = [
-        "method",
-        "training (s)",
-        "prepare windows (s)",
-        "predict (s)",
-        "per frame (ms)",
-        "speed-up vs DEM",
-        "RMSE / d",
-        "break-even frames (training)",
-        "(training + its DEM data)",
-    ]
-    body = []
-    for r in [dem, *rows]:
-        even = break_even(r.train_s, r.per_frame_s, dem.per_frame_s)
-        even_data = (
-            break_even(r.train_s + r.data_s, r.per_frame_s, dem.per_frame_s)
-            if r.data_s is not None and r.train_s is not None
-            else math.nan
-        )
-        body.append(
-            [
-                r.method + ("; " + "; ".join(r.notes) if r.notes else ""),
-                fmt(r.train_s),
-                "–" if r.kind == "dem" else fmt(r.prep_s),
-                fmt(r.predict_s),
-                fmt(1e3 * r.per_frame_s),
-                "1" if r.kind == "dem" else fmt(dem.per_frame_s / r.per_frame_s),
-                "0 (the truth)" if r.kind == "dem" else fmt(r.rmse_over_d),
-                "–" if r.kind == "dem" else ("never" if even == math.inf else fmt(even)),
-                "–" if r.kind == "dem" else ("never" if even_data == math.inf else fmt(even_data)),
-            ]
-        )
-    return markdown_table(headers, body)
-
-
-def pareto(points: list[tuple[float, float]]) -> list[int]:
-    """Indices of the non-dominated points (no other is both faster and more accurate),
-    ordered by time."""
-    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
-    front, best = [], math.inf
-    for i in order:
-        if points[i][1] < best:
-            front.append(i)
-            best = points[i][1]
-    return front
-
-
-def plot(groups: dict, path: Path, note: str = "") -> None:
-    """One panel per scene and split: wall time (log) against RMSE / d (log); the DEM, whose
-    error is 0, as a vertical line at its time; the Pareto front of the others joined."""
-    keys = sorted(groups)
-    ncols = min(4, len(keys))
-    nrows = -(-len(keys) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 4.6 * nrows), squeeze=False)
-    for ax in axes.flat[len(keys) :]:
-        ax.set_visible(False)
-    markers = "osD^v<>px*h"
-    colors = {"stay": "C1", "constant_velocity": "C2", "mean_flow": "C4", "linear_ar": "C0"}
-    for ax, key in zip(axes.flat, keys, strict=False):  # spare panels hidden above
-        rows = [r for r in groups[key]["rows"] if r.kind != "dem"]
-        dem = next(r for r in groups[key]["rows"] if r.kind == "dem")
-        pts = [(r.total_s, r.rmse_over_d) for r in rows]
-        for k, (r, (x, y)) in enumerate(zip(rows, pts, strict=True)):
-            color = colors.get(r.method, ("C3", "C5", "C6", "C8", "C9")[k % 5])
-            ax.scatter(
-                x, y, color=color, marker=markers[k % len(markers)], zorder=3, label=r.method
-            )
-        front = pareto(pts)
-        ax.step(
-            [pts[i][0] for i in front] + [dem.total_s],
-            [pts[i][1] for i in front] + [pts[front[-1]][1]],
-            where="post",
-            color="0.5",
-            lw=1,
-            zorder=1,
-            label="Pareto front",
-        )
-        ax.axvline(dem.total_s, color="k", ls="--", lw=1.2, label="DEM solver (error 0)")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        info = groups[key]["info"]
-        ax.set(
-            xlabel=f"wall time for {info['windows']} test windows x {info['horizon']} frames (s)",
-            ylabel="RMSE / d",
-            title=f"{key[0]} {key[1]} ({info['particles']} particles)",
-        )
-        ax.legend(fontsize=7)
-    fig.suptitle(f"run time against error{note}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def replot(path: Path) -> dict:
-    """The Pareto plot of a written ``time_vs_error.json``, next to it (nothing is re-timed)."""
-    report = json.loads(path.read_text())
-    fields = ("method", "kind", "prep_s", "predict_s", "frames", "rmse_over_d", "train_s", "data_s")
-    groups = {
-        (g["scene"], g["split"]): {
-            "info": g["info"],
-            "rows": [Row(**{k: r[k] for k in fields}) for r in g["rows"]],
-        }
-        for g in report["groups"]
-    }
-    figure = path.with_name("pareto_time_vs_error.png")
-    plot(
-        groups, figure, " (QUICK: a few test windows, DEM extrapolated)" if report["quick"] else ""
-    )
-    print(f"wrote {figure}")
-    return report
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -1,6 +1,6 @@
 """How much of what constant velocity misses is predictable, and by what kind of model?
 
-    python experiments/predictability.py [--scene pbc|lebc] [--horizon 10] [--quick]
+    python experiments/analyses/predictability.py [--scene pbc|lebc] [--horizon 10] [--quick]
 
 On the default dataset of a scene (generated on first use), out of sample (fit on simulations
 0-3, score on simulation 5, as protocol ``sims``), this fits linear least-squares models of
@@ -35,11 +35,11 @@ import torch
 from gripdem.boundary import (
     affine_flow_strain,
     lattice_continuous_steps,
+    neighbour_pairs,
     remove_affine_flow,
     step_start_x,
 )
 from gripdem.data.dataset_io import read_meta
-from gripdem.data.graph import neighbour_pairs
 from gripdem.dem.output import ensure_scene_dataset
 
 GAP_BINS = (
@@ -106,7 +106,9 @@ class Simulation:
         cv_residual = future - np.arange(1, horizon + 1)[None, :, None] * (
             self.steps[:, t - 1, None] / d
         )
-        i, j, vec = neighbour_pairs(self.positions[t], self.box, float(self.offsets[t]), 1.6 * d)
+        i, j, vec = neighbour_pairs(
+            self.positions[t], self.box, float(self.offsets[t]), 1.6 * d, both_directions=True
+        )
         vec = vec / d
         r = np.linalg.norm(vec, axis=1)
         n = vec / r[:, None]

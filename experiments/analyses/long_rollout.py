@@ -1,6 +1,6 @@
 """A long chained rollout of a trained model against the truth and the baselines.
 
-    python experiments/long_rollout.py CHECKPOINT DATA.h5 [--frames 1000] [--start 0]
+    python experiments/analyses/long_rollout.py CHECKPOINT DATA.h5 [--frames 1000] [--start 0]
         [--sim 0] [--steps 0 1] [--workdir DIR] [--figure experiments/figures/NAME.png]
 
 Runs ``python -m gripdem.predict`` once per link length in ``--steps`` (the model chains its

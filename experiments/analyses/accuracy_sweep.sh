@@ -5,7 +5,7 @@
 # the preset's 5: their validation RMSE plateaus after the first epoch (measured at 190-10 lebc:
 # 0.966, 0.956, 0.953, 0.952, 0.952 of CV's over epochs 1-5), and five epochs of all three
 # would triple the sweep's 6 hours on 2 cores.
-#   bash experiments/issue9_sweep.sh multirun/issue9
+#   bash experiments/analyses/accuracy_sweep.sh multirun/issue9
 set -euo pipefail
 out=${1:-multirun/issue9}
 python=${PYTHON:-.venv/bin/python}
@@ -16,4 +16,4 @@ for split in 190-10 180-20 150-50 100-100; do
   "$python" -m gripdem.run -m "${common[@]}" split=$split model=grip,pct,vct trainer.max_epochs=2 \
     hydra.sweep.dir="$out/$split-paper-models"
 done
-"$python" experiments/sweep_report.py "$out"/*/ --out experiments/figures
+"$python" experiments/analyses/sweep_report.py "$out"/*/ --out experiments/figures

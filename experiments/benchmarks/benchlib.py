@@ -26,7 +26,7 @@ import numpy as np
 import torch
 import yaml
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(__file__).resolve().parents[2] / "conf"
 GIB = 2**30
 
 

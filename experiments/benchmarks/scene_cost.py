@@ -1,8 +1,8 @@
 """Skip what a scene doesn't need: the periodic scene against the Lees-Edwards scene, and the
 cost LE-only work would add to the periodic scene if it were not skipped.
 
-    python experiments/bench_scene_cost.py [--frames 3] [--windows 5] [--repeats 3]
-    python experiments/bench_scene_cost.py --quick        # tiny scene, fewer repetitions
+    python experiments/benchmarks/scene_cost.py [--frames 3] [--windows 5] [--repeats 3]
+    python experiments/benchmarks/scene_cost.py --quick        # tiny scene, fewer repetitions
 
 Three stages, each timed side by side in one process (the variants interleaved, best of
 ``--repeats``, so a load change on a shared machine hits them alike):

@@ -1,99 +1,41 @@
-"""Numerical-stability stress suite, the fast cases (the slow ones run in
-``experiments/stress.py``; its ``--quick`` mode is a slow-tier test below).
+"""Numerical-stability stress suite, fast cases (1/2): DEM time steps, particles exactly on the
+faces, LE offsets and DEM restarts at very late absolute times, sin/cos pairs far off the unit
+circle. The slow cases run in ``experiments/benchmarks/stress.py``.
 
-Every test's docstring says what was tried and what must hold. Real components throughout:
-the built-in DEM, real HDF5 files, models built by :mod:`gripdem.runner.experiment` and trained by
-Lightning where training matters. Models that are not trained are either untrained (an
-exact-frame model is then constant velocity, SPEC §11) or "perturbed": every weight moved by
-seeded noise, so the network's output is far from zero and every layer matters.
+Every test's docstring says what was tried and what must hold. Real components throughout: the
+built-in DEM, real HDF5 files, models built by :mod:`gripdem.runner.experiment`. Models that are
+not trained are either untrained (an exact-frame model is then constant velocity, SPEC §11) or
+"perturbed" (``tests/support/stress_models.py``).
 """
 
 from __future__ import annotations
 
-import json
-import math
-from pathlib import Path
-
 import h5py
-import lightning as L
 import numpy as np
 import pytest
 import torch
 import yaml
-from hydra import compose, initialize_config_dir
-from lightning.pytorch.callbacks import Callback
+from stress_models import (
+    CONF,
+    DT,
+    D,
+    collate_all,
+    generator_config,
+    inside,
+    perturb,
+    predict_windows,
+    rmse_over_d,
+    smoke_model,
+)
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, minimum_image, wrap_positions
 from gripdem.data.batch import collate_windows
-from gripdem.data.dataset_io import read_dataset, write_dataset
+from gripdem.data.dataset_io import write_dataset
 from gripdem.data.schema import TrajectoryData
-from gripdem.data.units import rescale
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
 from gripdem.dem.scenes import simulate_one
-from gripdem.evaluation.metrics import position_residuals, rmse
 from gripdem.models.baselines import constant_velocity
-from gripdem.run import CONFIG_DIR
-from gripdem.runner.experiment import build_datamodule, build_model
-
-ROOT = Path(__file__).resolve().parents[1]
-CONF = ROOT / "conf"
-D = 2.5e-6
-DT = 5e-6
-
-
-# --------------------------------------------------------------------------------------------
-# helpers: models from the configs, their test-window predictions
-# --------------------------------------------------------------------------------------------
-def smoke_model(path: Path, *overrides: str):
-    """(model, datamodule) of the smoke preset on ``path``, untrained."""
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose("config", overrides=["experiment=smoke", f"data.path={path}", *overrides])
-    dm = build_datamodule(cfg, Path(path))
-    torch.manual_seed(0)
-    return build_model(cfg, dm).eval(), dm
-
-
-def perturb(model, scale: float = 0.05, seed: int = 1):
-    """Move every weight by seeded noise of ``scale`` (zero-initialised heads included)."""
-    g = torch.Generator().manual_seed(seed)
-    with torch.no_grad():
-        for p in model.parameters():
-            p.add_(scale * torch.randn(p.shape, generator=g, dtype=p.dtype))
-    return model
-
-
-@torch.no_grad()
-def predict_windows(model, dm, part: str = "test", autocast: bool = False):
-    """Decoded predictions, truths, target offsets (all windows of ``part``) and batches."""
-    preds, trues, offs, batches = [], [], [], []
-    for i in range(len(dm.datasets[part])):
-        batch = collate_windows([dm.datasets[part][i]])
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=autocast):
-            out = model(batch)
-        preds.append(model.decode(out, batch))
-        trues.append(batch.target_positions.double().transpose(1, 2))
-        offs.append(batch.target_offsets.double())
-        batches.append(batch)
-    return torch.cat(preds), torch.cat(trues), torch.cat(offs), batches
-
-
-def rmse_over_d(pred, true, offsets, model) -> float:
-    off = offsets if model.boundary.is_lees_edwards else None
-    return rmse(position_residuals(pred, true, model.boundary.box, off)) / model.diameter
-
-
-def inside(positions, box: Box) -> bool:
-    half = torch.as_tensor(0.5 * box.lengths)
-    return bool(((positions >= -half) & (positions < half)).all())
-
-
-def generator_config(scene: str, **overrides) -> GeneratorConfig:
-    s = yaml.safe_load((CONF / "scene" / f"{scene}.yaml").read_text())
-    p = yaml.safe_load((CONF / "preset" / "tiny.yaml").read_text())
-    for key, value in overrides.items():
-        (p if key in p else s)[key] = value
-    return GeneratorConfig.from_mappings(s, p, sims=1)
 
 
 # --------------------------------------------------------------------------------------------
@@ -275,19 +217,6 @@ def test_le_offsets_at_very_late_absolute_times(tmp_path):
         assert late[name] == pytest.approx(early[name], rel=tolerance), name
 
 
-def collate_all(batches):
-    """The windows of several one-window batches as one batch (for the baselines)."""
-    from dataclasses import fields, replace
-
-    first = batches[0]
-    stacked = {}
-    for f in fields(first):
-        value = getattr(first, f.name)
-        if isinstance(value, torch.Tensor) and not f.name.startswith("edge"):
-            stacked[f.name] = torch.cat([getattr(b, f.name) for b in batches])
-    return replace(first, **stacked)
-
-
 def test_dem_restart_at_very_late_absolute_time(tiny_lebc_path):
     """Tried: the built-in DEM restarted from a stored frame of the tiny LE dataset, once at
     the frame's own time and once 1e6 frame intervals later (4.6e8 steps: the same offset,
@@ -341,156 +270,3 @@ def test_sincos_pairs_far_off_the_unit_circle(tiny_lebc_path, model_name):
     wild = 1e6 * torch.randn(*last.shape[:2], f, c, generator=g, dtype=torch.float64)
     positions = model.decode(wild, batch)
     assert torch.isfinite(positions).all() and inside(positions, box)
-
-
-# --------------------------------------------------------------------------------------------
-# bf16 autocast on the CPU
-# --------------------------------------------------------------------------------------------
-#: bf16 keeps 8 significant bits (relative rounding 2^-9): what the network adds to constant
-#: velocity may change by 2 % under autocast, and the RMSE by 1 %
-BF16_CORRECTION_TOLERANCE = 0.02
-BF16_RMSE_TOLERANCE = 0.01
-
-
-@pytest.mark.parametrize("scene", ["pbc", "lebc"])
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
-def test_bf16_autocast_on_cpu_stays_within_tolerance_of_float32(request, scene, model_name):
-    """Tried: the test windows of a perturbed model (every weight moved, so the network's
-    output matters) run under ``torch.autocast("cpu", bfloat16)``; decoding stays float64.
-    Held: the positions differ from float32 by at most 2 % of the network's correction to
-    constant velocity (RMS; measured 0.3-0.9 %), and the RMSE by at most 1 % (measured
-    1e-5)."""
-    path = request.getfixturevalue(f"tiny_{scene}_path")
-    model, dm = smoke_model(path, f"scene={scene}", f"model={model_name}")
-    perturb(model)
-    pred32, true, offsets, batches = predict_windows(model, dm)
-    pred16, *_ = predict_windows(model, dm, autocast=True)
-    box = model.boundary.box
-    off = offsets[..., None] if model.boundary.is_lees_edwards else None
-    cv = model.predict_baselines(collate_all(batches))["constant_velocity"]
-    correction = rmse(minimum_image(pred32 - cv, box, off))
-    change = rmse(minimum_image(pred16 - pred32, box, off))
-    cv_error = rmse(minimum_image(cv - true, box, off))
-    assert correction > 0.03 * cv_error  # the network matters (5-10 % of CV's error here)
-    assert change <= BF16_CORRECTION_TOLERANCE * correction
-    r32, r16 = rmse_over_d(pred32, true, offsets, model), rmse_over_d(pred16, true, offsets, model)
-    assert abs(r16 / r32 - 1) <= BF16_RMSE_TOLERANCE
-
-
-# --------------------------------------------------------------------------------------------
-# SI units against a unit box
-# --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("scene", ["pbc", "lebc"])
-def test_si_units_and_a_unit_box_give_the_same_relative_error(request, tmp_path, scene):
-    """Tried: the tiny DEM dataset in SI units (d = 2.5e-6 m, frames 5e-6 s apart) and the same
-    data rescaled to a unit box and a unit frame interval (lengths / lx, times / dt); the
-    default model built on each (normaliser and AR baseline fitted there) with the same seeded
-    weights, perturbed alike.
-    Held: every baseline's RMSE / d agrees to 1e-9 and the model's to 1e-4 (float32 inputs
-    normalised from different magnitudes) relative."""
-    si = read_dataset(request.getfixturevalue(f"tiny_{scene}_path"))
-    unit = rescale(si, si.box.lx, si.frame_interval)
-    results = []
-    for name, data in (("si", si), ("unit", unit)):
-        path = write_dataset(tmp_path / f"{name}.h5", data)
-        model, dm = smoke_model(path, f"scene={scene}")
-        pred, true, offsets, batches = predict_windows(perturb(model), dm)
-        out = {"model": rmse_over_d(pred, true, offsets, model)}
-        for base, value in model.predict_baselines(collate_all(batches)).items():
-            out[base] = rmse_over_d(value, true, offsets, model)
-        results.append(out)
-    for name in results[0]:
-        tolerance = 1e-4 if name == "model" else 1e-9
-        assert results[1][name] == pytest.approx(results[0][name], rel=tolerance), name
-
-
-# --------------------------------------------------------------------------------------------
-# exploding gradients and injected NaNs stop training, naming the step
-# --------------------------------------------------------------------------------------------
-class AtStep(Callback):
-    """Runs ``action(trainer, module, batch)`` at one global step, in the hook ``where``."""
-
-    def __init__(self, step: int, where: str, action):
-        self.step, self.where, self.action = step, where, action
-
-    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx):
-        if self.where == "batch" and trainer.global_step == self.step:
-            self.action(pl_module, batch)
-
-    def on_after_backward(self, trainer, pl_module):
-        if self.where == "backward" and trainer.global_step == self.step:
-            self.action(pl_module, None)
-
-
-def fit(model, dm, callback=None, max_steps: int = 6):
-    trainer = L.Trainer(
-        max_steps=max_steps,
-        limit_val_batches=0,
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        num_sanity_val_steps=0,
-        gradient_clip_val=1.0,
-        callbacks=[callback] if callback else [],
-    )
-    trainer.fit(model, dm)
-
-
-def nan_into_batch(module, batch):
-    batch.inputs[0, 0, -1] = math.nan
-    batch.input_positions[0, 0, -1] = math.nan
-
-
-def inf_into_gradient(module, batch):
-    next(p for p in module.parameters() if p.grad is not None).grad.fill_(math.inf)
-
-
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
-def test_nan_injected_into_a_training_batch_stops_at_that_step(tiny_pbc_path, model_name):
-    """Tried: a NaN written into one input step of the batch of global step 3, during a real
-    Lightning fit (gradient clipping on, as the presets have it).
-    Held: training stops with a FloatingPointError naming global step 3. (A NaN in the data
-    file is refused when it is read, naming the field: tests/data/test_schema.py; NaN weights
-    stop the next step: tests/models/test_divergence.py.)"""
-    model, dm = smoke_model(tiny_pbc_path, f"model={model_name}")
-    with pytest.raises(FloatingPointError, match=r"non-finite training loss .* global step 3 "):
-        fit(model.train(), dm, AtStep(3, "batch", nan_into_batch))
-
-
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
-def test_infinite_gradient_stops_at_its_step_before_the_weights_change(tiny_pbc_path, model_name):
-    """Tried: one parameter's gradient overflowed to +inf after the backward pass of global
-    step 2 while the loss stayed finite (clipping on: an infinite norm clips to NaN).
-    Held: training stops at step 2 with an error naming the parameter and the step, and the
-    weights are still finite (the optimiser did not run)."""
-    model, dm = smoke_model(tiny_pbc_path, f"model={model_name}")
-    with pytest.raises(FloatingPointError, match=r"non-finite gradient of \S+ at global step 2 "):
-        fit(model.train(), dm, AtStep(2, "backward", inf_into_gradient))
-    assert all(torch.isfinite(p).all() for p in model.parameters())
-
-
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
-def test_exploding_weights_stop_with_the_step_named(tiny_pbc_path, model_name):
-    """Tried: a learning rate of 1e30 (Adam moves every weight by ~1e30 per step).
-    Held: training stops within a few steps with a FloatingPointError naming the global step
-    (the loss or a gradient overflows), never a silent NaN model."""
-    model, dm = smoke_model(tiny_pbc_path, f"model={model_name}", "model.lr=1e30")
-    with pytest.raises(FloatingPointError, match=r"at global step [1-5] "):
-        fit(model.train(), dm)
-
-
-# --------------------------------------------------------------------------------------------
-# the slow cases: experiments/stress.py --quick
-# --------------------------------------------------------------------------------------------
-@pytest.mark.slow
-def test_stress_script_quick(tmp_path, run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
-    """Long chained rollouts of trained smoke models, bf16 and SI-vs-unit with trained
-    models: the script's quick mode runs (on the session's tiny datasets) and every case
-    holds."""
-    out = tmp_path / "stress.json"
-    proc = run_experiment_quick("stress", "--json", str(out))
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    assert "machine:" in proc.stdout and "torch" in proc.stdout
-    report = json.loads(out.read_text())
-    assert report["cases"] and all(case["held"] for case in report["cases"]), report["cases"]

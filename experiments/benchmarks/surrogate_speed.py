@@ -1,9 +1,9 @@
 """Surrogate speed-up: time per predicted frame, model vs the DEM solver, at 2000-32000 particles.
 
-    python experiments/bench_surrogate.py [--checkpoint pbc=RUN/checkpoints/best.ckpt
+    python experiments/benchmarks/surrogate_speed.py [--checkpoint pbc=RUN/checkpoints/best.ckpt
         lebc=...] [--scenes pbc lebc] [--sizes 2000 8000 32000] [--dem-frames 2]
         [--threads 1] [--memory-budget-gb 8] [--json out.json]
-    python experiments/bench_surrogate.py --quick      # tiny scene, 400 and 1600 particles
+    python experiments/benchmarks/surrogate_speed.py --quick  # tiny scene, 400 and 1600 particles
 
 States of more particles are the scene's default dataset tiled along y and z (2 x 2 copies
 for 8000, 4 x 4 for 32000; the same neighbourhoods, the same frame interval, a valid state

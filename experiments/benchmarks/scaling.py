@@ -1,9 +1,9 @@
 """Scaling: inference and one training step against particle count, history length and threads.
 
-    python experiments/bench_scaling.py [--scene pbc] [--ops sparse dense interaction]
+    python experiments/benchmarks/scaling.py [--scene pbc] [--ops sparse dense interaction]
         [--sizes 2000 4000 8000 16000 32000 64000] [--histories 10 50 190]
         [--threads 1 2] [--memory-budget-gb 8] [--max-seconds 120] [--json out.json]
-    python experiments/bench_scaling.py --quick     # tiny scene: 400 and 1600 particles
+    python experiments/benchmarks/scaling.py --quick     # tiny scene: 400 and 1600 particles
 
 Three forms of the model, each the real :class:`~gripdem.models.module.TrajectoryModule` at
 the fast preset's widths (untrained: the same operations and time as trained):

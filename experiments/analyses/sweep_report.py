@@ -1,6 +1,7 @@
 """Results of a model x split x seed sweep: tables (mean ± std over seeds) and figures.
 
-    python experiments/sweep_report.py SWEEP_DIR [SWEEP_DIR ...] [--out experiments/figures]
+    python experiments/analyses/sweep_report.py SWEEP_DIR [SWEEP_DIR ...]
+        [--out experiments/figures]
 
 Reads every job's ``metrics.json`` (through :func:`gripdem.evaluation.sweep_summary.collect`),
 groups the jobs by (scene, split, model) over seeds and writes into ``--out``:

@@ -1,8 +1,8 @@
 """Numerical-stability stress cases too slow for the test suite (the fast ones are in
-``tests/test_stress.py``). Each case says what was tried, whether it held, and what was measured.
+``tests/stress/``). Each case says what was tried, whether it held, and what was measured.
 
-    python experiments/stress.py --quick                   # smoke models trained here (minutes)
-    python experiments/stress.py RUN_OR_SWEEP_DIR... [--frames 1000] [--windows N]
+    python experiments/benchmarks/stress.py --quick        # smoke models trained here (minutes)
+    python experiments/benchmarks/stress.py RUN_OR_SWEEP_DIR... [--frames 1000] [--windows N]
         [--rollout-splits 190-10 100-100] [--rollout-scenes pbc lebc] [--json F]
 
 Cases:

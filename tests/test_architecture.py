@@ -1,0 +1,68 @@
+"""The package's shape (README "Architecture"): the top level holds only the entry points and the
+ground module, every layer folder says what it holds, and every file keeps to the 400-line
+style. The import layers themselves are checked by ``lint-imports`` (pyproject.toml), which the
+README's test command runs before the tests."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import gripdem
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = Path(gripdem.__file__).resolve().parent
+ENTRY_POINTS = {
+    "run",
+    "simulate",
+    "convert",
+    "predict",
+    "handback",
+    "claims",
+    "physics_report",
+    "summary",
+}
+LAYERS = {
+    "boundary",
+    "data",
+    "dem",
+    "formats",
+    "evaluation",
+    "nn",
+    "models",
+    "inference",
+    "plots",
+    "runner",
+}
+MAX_LINES = 400
+
+
+def test_top_level_holds_entry_points_and_the_ground_module_only():
+    modules = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__"}
+    assert modules == ENTRY_POINTS
+    folders = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists()}
+    assert folders == LAYERS
+
+
+def test_every_entry_point_has_a_main_and_is_runnable():
+    for name in ENTRY_POINTS:
+        tree = ast.parse((PACKAGE / f"{name}.py").read_text())
+        functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+        assert "main" in functions, name
+        assert "__main__" in (PACKAGE / f"{name}.py").read_text(), name
+
+
+def test_every_layer_says_what_it_holds():
+    for name in LAYERS:
+        doc = ast.get_docstring(ast.parse((PACKAGE / name / "__init__.py").read_text()))
+        assert doc and len(doc.split()) >= 20, f"gripdem/{name}/__init__.py needs a docstring"
+
+
+def test_every_file_keeps_to_400_lines():
+    long = {}
+    for folder in ("gripdem", "experiments", "tests"):
+        for path in (ROOT / folder).rglob("*.py"):
+            lines = len(path.read_text().splitlines())
+            if lines > MAX_LINES:
+                long[str(path.relative_to(ROOT))] = lines
+    assert not long, f"files over {MAX_LINES} lines: {long}"

@@ -3,7 +3,8 @@
 Every other layer calls this one; nothing re-implements wrapping, minimum images, LE offsets,
 the sin/cos codec or the LE neighbour search. Modules: ``cell`` (Box, LeesEdwards, Boundary,
 checks), ``images`` (wrap, minimum image), ``continuous`` (lattice-continuous steps, affine
-flow, unwrap), ``codec`` (sin/cos), ``neighbours`` (the O(n) LE pair search). All functions
+flow, unwrap), ``codec`` (sin/cos), ``neighbours`` (the O(n) LE pair search) and ``neighbour_list``
+(the same with a skin, followed over frames). All functions
 take numpy arrays or torch tensors with any leading batch shape and return the same kind.
 
 Conventions (SPEC §2):
@@ -50,7 +51,13 @@ from gripdem.boundary.images import (
     wrap_into_sheared_cell,
     wrap_positions,
 )
-from gripdem.boundary.neighbours import brute_force_pairs, le_cell, neighbour_pairs
+from gripdem.boundary.neighbour_list import NeighbourList
+from gripdem.boundary.neighbours import (
+    brute_force_pairs,
+    le_cell,
+    neighbour_pairs,
+    neighbour_pairs_with_shifts,
+)
 
 __all__ = [
     "Array",
@@ -71,7 +78,9 @@ __all__ = [
     "le_cell",
     "le_offset_increments",
     "minimum_image",
+    "NeighbourList",
     "neighbour_pairs",
+    "neighbour_pairs_with_shifts",
     "remove_affine_flow",
     "rewrap_trajectory",
     "sincos_decode",

@@ -72,6 +72,27 @@ def neighbour_pairs(
     return i, j, vec
 
 
+def neighbour_pairs_with_shifts(
+    positions: np.ndarray, box: Box, offset: float, cutoff: float, n_threads: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each pair within ``cutoff`` once, with its lattice image: ``(i, j, shift)`` with int64
+    ``i``, ``j`` ``(P,)`` and float64 whole-number ``shift`` ``(P, 3)`` such that the minimum
+    image vector is ``r_j - r_i + shift @ le_cell(box, offset)``. Needs ``cutoff`` below half the
+    smallest box length (one image per pair); :class:`gripdem.boundary.NeighbourList` keeps the
+    shifts to recompute the vectors at later frames."""
+    positions = np.ascontiguousarray(positions, dtype=np.float64)
+    if not 0 < 2 * cutoff < float(box.lengths.min()):
+        raise ValueError(
+            f"a pair search with image shifts needs 0 < cut-off < half the smallest box length "
+            f"({0.5 * box.lengths.min():g}), got {cutoff!r}"
+        )
+    radius = max(float(cutoff), MIN_SEARCH_FRACTION * float(box.lengths.min()))
+    nl = vesin.NeighborList(cutoff=radius, full_list=False, n_threads=n_threads)
+    i, j, shift, vec = nl.compute(positions, le_cell(box, float(offset)), True, "ijSD")
+    keep = np.einsum("pc,pc->p", vec, vec) < cutoff * cutoff
+    return i[keep].astype(np.int64), j[keep].astype(np.int64), shift[keep].astype(np.float64)
+
+
 def brute_force_pairs(
     positions: np.ndarray, box: Box, offset: float, cutoff: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -28,6 +28,7 @@ from gripdem.data.batch import WindowBatch, collate_windows
 from gripdem.data.dataset import FrameReader, WindowDataset
 from gripdem.data.dataset_io import read_meta
 from gripdem.data.encodings import ENCODINGS, Encoding, make_encoding
+from gripdem.data.frames import FrameStore
 from gripdem.data.graph import DEFAULT_ALPHA
 from gripdem.data.normalizer import Normalizer
 from gripdem.data.protocols import PARTS, WindowPlan, plan_windows
@@ -74,6 +75,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         graph_cutoff: float = 3.0,
         graph_alpha: float = DEFAULT_ALPHA,
         graph_cache_mb: float = 256.0,
+        memory_mb: float = 2048.0,
         batch_size: int = 1,
         num_workers: int = 0,
         pin_memory: bool = False,
@@ -106,6 +108,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.graph_cutoff = float(graph_cutoff)
         self.graph_alpha = float(graph_alpha)
         self.graph_cache_mb = float(graph_cache_mb)
+        self.memory_mb = float(memory_mb)
         self.batch_size = int(batch_size)
         self.num_workers = int(num_workers)
         self.pin_memory = bool(pin_memory)
@@ -163,6 +166,17 @@ class TrajectoryDataModule(L.LightningDataModule):
                 f"encoding {self.encoding.name!r} has {self.encoding.n_channels}"
             )
         cutoff = self.graph_cutoff * meta.diameter
+        store = FrameStore(
+            lambda sim: reader.read(sim, 0, meta.n_frames),
+            times,
+            meta.boundary,
+            self.normalizer,
+            cutoff,
+            meta.diameter,
+            self.graph_alpha,
+            self.memory_mb,
+            meta.n_frames * meta.n_particles * 3 * 8 / 2**20,
+        )
         self.datasets = {
             part: WindowDataset(
                 reader,
@@ -175,6 +189,7 @@ class TrajectoryDataModule(L.LightningDataModule):
                 self.graph_alpha,
                 self.graph_cache_mb,
                 self.plan.in_sample,
+                store,
             )
             for part in PARTS
         }
@@ -286,6 +301,8 @@ class TrajectoryDataModule(L.LightningDataModule):
             self.normalizer = self._restored
             for ds in self.datasets.values():
                 ds.normalizer = self._restored
+                if ds.store is not None:
+                    ds.store.use_normalizer(self._restored)
 
     def teardown(self, stage: str | None = None) -> None:
         if self.datasets:

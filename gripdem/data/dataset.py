@@ -16,6 +16,7 @@ import numpy as np
 from torch.utils.data import Dataset
 
 from gripdem.data.encodings import Encoding, x_face_crossings
+from gripdem.data.frames import FrameStore, SimulationFrames
 from gripdem.data.graph import DEFAULT_ALPHA, Graph, build_graph
 from gripdem.data.normalizer import Normalizer
 from gripdem.data.schema import DatasetMeta
@@ -65,6 +66,7 @@ class WindowDataset(Dataset):
         graph_alpha: float = DEFAULT_ALPHA,
         graph_cache_mb: float = 256.0,
         in_sample: bool = False,
+        store: FrameStore | None = None,
     ):
         self.reader = reader
         self.meta = meta
@@ -79,23 +81,34 @@ class WindowDataset(Dataset):
         self.in_sample = in_sample
         self._graphs: OrderedDict[tuple[int, int], Graph] = OrderedDict()
         self._graph_bytes = 0
+        # the in-memory fast path: exact-frame windows of simulations that fit the budget
+        self.store = store if encoding.name == "unwrapped" else None
 
     def __len__(self) -> int:
         return len(self.windows)
 
     def graph(self, sim: int, frame: int, positions: np.ndarray) -> Graph:
+        """The graph of a frame searched afresh (the file path), through the cache."""
+
+        def search(frame: int) -> Graph:
+            return build_graph(
+                positions,
+                self.meta.box,
+                float(self.offsets[sim, frame]),
+                self.graph_cutoff,
+                self.graph_alpha,
+                length_unit=self.meta.diameter,
+            )
+
+        return self.cached_graph(sim, frame, search)
+
+    def cached_graph(self, sim: int, frame: int, make) -> Graph:
+        """``make(frame)`` through the per-process LRU of graphs (``graph_cache_mb``)."""
         key = (sim, frame)
         if key in self._graphs:
             self._graphs.move_to_end(key)
             return self._graphs[key]
-        g = build_graph(
-            positions,
-            self.meta.box,
-            float(self.offsets[sim, frame]),
-            self.graph_cutoff,
-            self.graph_alpha,
-            length_unit=self.meta.diameter,
-        )
+        g = make(frame)
         self._graphs[key] = g
         self._graph_bytes += g.nbytes
         while self._graph_bytes > self.graph_cache_bytes and self._graphs:
@@ -113,6 +126,9 @@ class WindowDataset(Dataset):
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         w = self.windows[index]
+        frames = None if self.store is None else self.store.frames(w.sim)
+        if frames is not None:
+            return self._prepared(w, frames)
         k = w.history_len
         pos = self.reader.read(w.sim, w.start, w.stop).transpose(1, 0, 2)  # (N, T, 3)
         offs = self.offsets[w.sim, w.start : w.stop]
@@ -127,6 +143,29 @@ class WindowDataset(Dataset):
             "offsets": offs.copy(),
             "graph": self.graph(w.sim, w.last_observed, np.ascontiguousarray(pos[:, k])),
             "crossing_mask": self.crossing_mask(pos[:, k:], offs[k:]),
+            "sim": w.sim,
+            "start": w.start,
+            "in_sample": self.in_sample,
+        }
+
+    def _prepared(self, w, frames: SimulationFrames) -> dict[str, Any]:
+        """The same sample from a simulation prepared in memory (:mod:`gripdem.data.frames`)."""
+        k = w.history_len
+        pos = frames.by_particle[:, w.start : w.stop]
+        _, deltas = frames.window_steps(w.start, w.stop, w.last_observed)
+        le = self.meta.boundary.is_lees_edwards
+        n = pos.shape[0]
+        return {
+            "inputs": np.ascontiguousarray(deltas[:, :k]),
+            "target_deltas": np.ascontiguousarray(deltas[:, k:]),
+            "input_positions": np.ascontiguousarray(pos[:, : k + 1]),
+            "target_positions": np.ascontiguousarray(pos[:, k + 1 :]),
+            "times": self.times[w.sim, w.start : w.stop].copy(),
+            "offsets": self.offsets[w.sim, w.start : w.stop].copy(),
+            "graph": self.cached_graph(w.sim, w.last_observed, frames.graph),
+            "crossing_mask": (
+                frames.crossers(w.last_observed, w.stop) if le else np.zeros(n, dtype=bool)
+            ),
             "sim": w.sim,
             "start": w.start,
             "in_sample": self.in_sample,

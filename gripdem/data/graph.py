@@ -87,11 +87,26 @@ def build_graph(
 ) -> Graph:
     """The fixed graph of one frame: ``positions (N, 3)`` wrapped, ``offset`` its LE offset,
     ``cutoff`` in metres; edge vectors and distances are divided by ``length_unit``."""
-    n = len(positions)
-    i, j, vec = neighbour_pairs(positions, box, offset, cutoff, n_threads, both_directions=True)
-    self_w, pair_w = fixed_graph_weights(i, j, n, alpha)
-    nodes = np.arange(n, dtype=np.int64)
-    vec = np.concatenate([np.zeros((n, 3)), vec]) / length_unit
+    i, j, vec = neighbour_pairs(positions, box, offset, cutoff, n_threads)
+    return graph_from_pairs(i, j, vec, len(positions), alpha, length_unit)
+
+
+def graph_from_pairs(
+    i: np.ndarray,
+    j: np.ndarray,
+    vectors: np.ndarray,
+    n_nodes: int,
+    alpha: float = DEFAULT_ALPHA,
+    length_unit: float = 1.0,
+) -> Graph:
+    """The fixed graph from each pair once: ``i``, ``j`` ``(P,)`` and minimum-image vectors
+    ``r_j - r_i`` ``(P, 3)`` float64 (from :func:`gripdem.boundary.neighbour_pairs` or a
+    :class:`gripdem.boundary.NeighbourList`); adds the reverse pairs and the self pairs."""
+    i, j = np.concatenate([i, j]), np.concatenate([j, i])
+    vec = np.concatenate([vectors, -vectors])
+    self_w, pair_w = fixed_graph_weights(i, j, n_nodes, alpha)
+    nodes = np.arange(n_nodes, dtype=np.int64)
+    vec = np.concatenate([np.zeros((n_nodes, 3)), vec]) / length_unit
     distance = np.sqrt(np.einsum("ec,ec->e", vec, vec))
     return Graph(
         edge_index=np.stack([np.concatenate([nodes, i]), np.concatenate([nodes, j])]),
@@ -99,5 +114,5 @@ def build_graph(
         edge_vector=vec.astype(np.float32),
         edge_distance=distance.astype(np.float32),
         edge_gap=(distance - 1.0).astype(np.float32),
-        n_nodes=n,
+        n_nodes=n_nodes,
     )

@@ -146,6 +146,7 @@ class DataSchema:
     graph_cutoff: float = 3.0
     graph_alpha: float = 0.001
     graph_cache_mb: float = 256.0
+    memory_mb: float = 2048.0
     batch_size: int = 1
     num_workers: int = 0
     pin_memory: bool = False

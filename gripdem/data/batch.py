@@ -40,12 +40,15 @@ class WindowBatch:
       the f target steps; all False in a periodic box.
     - ``sim_index (B,)``, ``window_start (B,)``: simulation index and first frame of each window.
     - ``in_sample``: True under the ``paper`` protocol (train = test); report it.
+
+    An inference batch (:func:`inference_batch`) has no targets: ``target_deltas``,
+    ``target_positions`` and ``crossing_mask`` are None; what a model reads to predict is there.
     """
 
     inputs: torch.Tensor
-    target_deltas: torch.Tensor
+    target_deltas: torch.Tensor | None
     input_positions: torch.Tensor
-    target_positions: torch.Tensor
+    target_positions: torch.Tensor | None
     times: torch.Tensor
     offsets: torch.Tensor
     edge_index: torch.Tensor
@@ -54,7 +57,7 @@ class WindowBatch:
     edge_distance: torch.Tensor
     edge_gap: torch.Tensor
     edge_ptr: torch.Tensor
-    crossing_mask: torch.Tensor
+    crossing_mask: torch.Tensor | None
     sim_index: torch.Tensor
     window_start: torch.Tensor
     in_sample: bool = False
@@ -73,7 +76,9 @@ class WindowBatch:
 
     @property
     def horizon(self) -> int:
-        return int(self.target_deltas.shape[2])
+        """f: the frames after the last observed one (their times and offsets are known even
+        when their positions are not, as in an inference batch)."""
+        return int(self.times.shape[1]) - self.history_len - 1
 
     @property
     def last_positions(self) -> torch.Tensor:
@@ -150,4 +155,37 @@ def collate_windows(samples: Sequence[dict[str, Any]]) -> WindowBatch:
         sim_index=torch.tensor([s["sim"] for s in samples], dtype=torch.int64),
         window_start=torch.tensor([s["start"] for s in samples], dtype=torch.int64),
         in_sample=bool(samples[0]["in_sample"]),
+    )
+
+
+def inference_batch(
+    inputs: np.ndarray,
+    input_positions: np.ndarray,
+    times: np.ndarray,
+    offsets: np.ndarray,
+    graphs: Sequence[Graph],
+) -> WindowBatch:
+    """A batch to predict from, without targets: ``inputs (B, N, K, C)`` normalised float32,
+    ``input_positions (B, N, K+1, 3)``, ``times`` and ``offsets`` ``(B, K+1+f)`` of the observed
+    and the predicted frames, one graph per window (at its last observed frame)."""
+    n = input_positions.shape[1]
+    counts = [g.n_edges for g in graphs]
+    edge_index = np.concatenate([g.edge_index + b * n for b, g in enumerate(graphs)], axis=1)
+    b = input_positions.shape[0]
+    return WindowBatch(
+        inputs=torch.from_numpy(np.ascontiguousarray(inputs, dtype=np.float32)),
+        target_deltas=None,
+        input_positions=torch.from_numpy(np.ascontiguousarray(input_positions)),
+        target_positions=None,
+        times=torch.from_numpy(np.ascontiguousarray(times, dtype=np.float64)),
+        offsets=torch.from_numpy(np.ascontiguousarray(offsets, dtype=np.float64)),
+        edge_index=torch.from_numpy(edge_index),
+        edge_weight=torch.from_numpy(np.concatenate([g.edge_weight for g in graphs])),
+        edge_vector=torch.from_numpy(np.concatenate([g.edge_vector for g in graphs])),
+        edge_distance=torch.from_numpy(np.concatenate([g.edge_distance for g in graphs])),
+        edge_gap=torch.from_numpy(np.concatenate([g.edge_gap for g in graphs])),
+        edge_ptr=torch.from_numpy(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)),
+        crossing_mask=None,
+        sim_index=torch.arange(b, dtype=torch.int64),
+        window_start=torch.zeros(b, dtype=torch.int64),
     )

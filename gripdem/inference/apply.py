@@ -21,6 +21,7 @@ from gripdem.evaluation.metrics import position_residuals, rmse_per_step
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.inference.checkpoint import check_compatible, load_model, training_overlap
 from gripdem.inference.rollout import rollout
+from gripdem.inference.stepper import StepperSettings
 from gripdem.models.baselines import predict_baseline
 
 
@@ -78,16 +79,20 @@ def apply_checkpoint(
         all_times = np.asarray(h5["times"][()], np.float64)[sims]
         radii = np.asarray(h5["radii"][()]) if "radii" in h5 else None
     observed = _read_frames(data_path, sims, start, start + k + 1)
+    settings = StepperSettings(
+        link=args.step,
+        contact_correction=not getattr(args, "no_correction", False),
+        contact_distance=float(getattr(args, "contact_distance", 1.0)),
+    )
     run = rollout(
-        model,
+        model.to(args.device),
         meta,
         observed,
         all_times[:, start : start + k + 1],
         frames,
-        args.step,
+        settings,
         args.overlap_margin,
         not args.no_overlap,
-        args.device,
     )
     first = start + k + 1
     n_truth = max(0, min(run.n_predicted, meta.n_frames - first))
@@ -106,6 +111,7 @@ def apply_checkpoint(
         "history_len": k,
         "horizon": f,
         "step": f if args.step is None else int(args.step),
+        "settings": settings.to_dict(),
         "encoding": hp["encoding"],
         "decoder_mode": hp["decoder_mode"],
         "encoder": (hp.get("encoder") or {}).get("name", "graph_conv"),

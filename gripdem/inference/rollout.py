@@ -1,14 +1,10 @@
 """Chained rollouts of a trained model beyond its horizon, with divergence checks.
 
 A model predicts ``f`` frames (its horizon) from a window of ``K + 1`` observed frames. A
-rollout of ``n`` frames chains such predictions: the predicted frames become the history of the
-next window (``step`` frames per link, at most ``f``), until ``n`` frames exist. Each window is
-built by the same code as training and test windows
-(:class:`~gripdem.data.datamodule.WindowDataset` and
-:func:`~gripdem.data.batch.collate_windows`), reading its frames from an in-memory buffer of
-observed and predicted frames instead of the file. The target fields of these batches are not
-the truth (the frames after the last observed one are a copy of it while unknown); the model
-never reads them.
+rollout of ``n`` frames chains such predictions with the in-memory
+:class:`~gripdem.inference.stepper.Stepper`: the predicted (and, in the stable setting,
+contact-corrected) frames become the history of the next link (``link`` frames per forward
+pass, at most ``f``), until ``n`` frames exist.
 
 Divergence is flagged per predicted frame, never raised:
 
@@ -16,8 +12,9 @@ Divergence is flagged per predicted frame, never raised:
   history cannot be continued);
 - ``escaped``: particles whose frame-to-frame step exceeds ``ESCAPE_FRACTION`` of the smallest
   box length (they have left the box in a way no image can follow);
-- ``overlap``: the fraction of particles with a neighbour closer than 0.98 d exceeds the
-  observed frame's by more than ``overlap_margin``.
+- ``overlap``: the fraction of particles with a neighbour closer than 0.98 d (in the frames as
+  kept, after any contact correction; the model's own overlaps before the correction are in
+  the stepper's report) exceeds the observed frame's by more than ``overlap_margin``.
 
 Shapes: ``S`` simulations rolled out together (one batch), ``N`` particles, positions
 ``(S, frames, N, 3)`` wrapped float64, times ``(S, frames)`` absolute.
@@ -28,32 +25,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from gripdem.boundary import displacement
-from gripdem.data.batch import collate_windows
-from gripdem.data.dataset import WindowDataset
 from gripdem.data.schema import DatasetMeta
-from gripdem.data.windows import Segment, WindowIndex
-from gripdem.evaluation.physics import overlap_fraction
+from gripdem.evaluation.physics import OVERLAP_TOLERANCE
+from gripdem.inference.stepper import Stepper, StepperSettings
 
 #: a predicted step longer than this fraction of the smallest box length counts as an escape
 ESCAPE_FRACTION = 0.25
 #: default: flag overlap once this many more particles overlap than at the observed frame
 OVERLAP_MARGIN = 0.05
-
-
-class _BufferReader:
-    """Frames from memory with the file reader's interface (``read(sim, start, stop)``)."""
-
-    def __init__(self, positions: np.ndarray):
-        self.positions = positions
-
-    def read(self, sim: int, start: int, stop: int) -> np.ndarray:
-        return self.positions[sim, start:stop]
-
-    def close(self) -> None:
-        pass
 
 
 @dataclass
@@ -94,6 +75,7 @@ class Rollout:
     times: np.ndarray
     n_observed: int
     divergence: Divergence
+    stepper: Stepper | None = None
 
     @property
     def n_predicted(self) -> int:
@@ -129,90 +111,56 @@ def _record(
     return frames.shape[1]
 
 
-def _window_batch(buffer, times, meta, model, start: int, k: int, f: int):
-    """The batch of the windows that start at buffer frame ``start`` (one per simulation)."""
-    windows = WindowIndex([Segment(s, start, 1, 1) for s in range(buffer.shape[0])], k, f)
-    dataset = WindowDataset(
-        _BufferReader(buffer),
-        meta,
-        times,
-        windows,
-        model.encoding,
-        model.normalizer,
-        float(model.hparams.graph_cutoff) * meta.diameter,
-        graph_cache_mb=0.0,
-    )
-    return collate_windows([dataset[i] for i in range(len(dataset))])
+def overlap_fraction(stepper: Stepper, tolerance: float = OVERLAP_TOLERANCE) -> float:
+    """Fraction of particles with a neighbour closer than ``tolerance`` d at the stepper's
+    newest frame (from its neighbour lists: no new search), mean over the simulations."""
+    fractions = []
+    for sim, nl in enumerate(stepper.lists):
+        i, j, _ = nl.pairs(stepper.times[sim, -1], tolerance * stepper.d)
+        touched = np.zeros(len(nl.q), dtype=bool)
+        touched[i] = touched[j] = True
+        fractions.append(touched.mean())
+    return float(np.mean(fractions))
 
 
-@torch.no_grad()
 def rollout(
     model,
     meta: DatasetMeta,
     observed: np.ndarray,
     observed_times: np.ndarray,
     frames: int,
-    step: int | None = None,
+    settings: StepperSettings | None = None,
     overlap_margin: float = OVERLAP_MARGIN,
     check_overlap: bool = True,
-    device: str = "cpu",
 ) -> Rollout:
     """Roll ``model`` out for ``frames`` frames after the ``K + 1`` observed frames
-    ``(S, K+1, N, 3)`` (times ``(S, K+1)``), ``step`` predicted frames per link (default: the
-    model's horizon). Stops early only at non-finite positions."""
-    k, f = int(model.hparams.history_len), int(model.hparams.horizon)
-    step = f if step is None else int(step)
-    if not 1 <= step <= f:
-        raise ValueError(f"--step must lie in 1..{f} (the model's horizon), got {step}")
-    if observed.shape[1] != k + 1:
-        raise ValueError(f"the model reads {k + 1} observed frames, got {observed.shape[1]}")
-    model.eval().to(device)
-    s, _, n, _ = observed.shape
-    total = k + 1 + frames
-    dt = meta.frame_interval
-    times = observed_times[:, -1:] + dt * np.arange(-k, total + f - k)[None, :]
-    times[:, : k + 1] = observed_times
-    buffer = np.empty((s, total + f, n, 3))
-    buffer[:, : k + 1] = observed
-    offsets = meta.boundary.offset(times)
+    ``(S, K+1, N, 3)`` (times ``(S, K+1)``) with the in-memory :class:`Stepper` (``settings``:
+    link length, contact correction; default the stable setting). Stops early only at
+    non-finite positions. The model must already be on its device."""
+    stepper = Stepper(model, observed, observed_times, settings)
+    k = stepper.k
     div = Divergence()
     if check_overlap:
-        last = observed[:, -1]
-        div.overlap_start = float(
-            np.mean(
-                [
-                    overlap_fraction(last[i], meta.box, meta.diameter, offsets[i, k])
-                    for i in range(s)
-                ]
-            )
-        )
+        div.overlap_start = overlap_fraction(stepper)
+    kept = [np.asarray(observed, dtype=np.float64)]
+    times = [np.asarray(observed_times, dtype=np.float64)]
     done = 0
-    while done < frames and div.stopped is None:
-        start = done  # the window's first frame: its last observed frame is start + k
-        buffer[:, start + k + 1 : start + k + 1 + f] = buffer[:, start + k, None]
-        batch = _window_batch(buffer, times, meta, model, start, k, f).to(device)
-        predicted = model.decode(model(batch), batch).cpu().numpy()  # (S, f, N, 3)
-        m = min(step, frames - done)
-        at = start + k + 1
-        good = _record(
-            div, predicted[:, :m], buffer[:, at - 1], offsets[:, at : at + m], meta, done + 1
-        )
-        buffer[:, at : at + good] = predicted[:, :good]
-        if check_overlap:
-            for j in range(good):
-                value = float(
-                    np.mean(
-                        [
-                            overlap_fraction(
-                                predicted[i, j], meta.box, meta.diameter, offsets[i, at + j]
-                            )
-                            for i in range(s)
-                        ]
-                    )
-                )
+    while done < frames:
+        new = stepper.advance(1)
+        if new.shape[1]:
+            offsets = meta.boundary.offset(stepper.times[:, -1:])
+            _record(div, new, kept[-1][:, -1], offsets, meta, done + 1)
+            kept.append(new)
+            times.append(stepper.times[:, -1:].copy())
+            if check_overlap:
+                value = overlap_fraction(stepper)
                 div.overlap.append(value)
                 if value > div.overlap_start + overlap_margin:
-                    div.first.setdefault("overlap", done + j + 1)
-        done += good
-    end = k + 1 + done
-    return Rollout(buffer[:, :end].copy(), times[:, :end].copy(), k + 1, div)
+                    div.first.setdefault("overlap", done + 1)
+            done += 1
+        if stepper.stopped is not None:
+            div.first.setdefault("non_finite", done + 1)
+            div.stopped = stepper.stopped
+            break
+    positions = np.concatenate(kept, axis=1)
+    return Rollout(positions, np.concatenate(times, axis=1), k + 1, div, stepper)

@@ -13,7 +13,6 @@ geometry and motion, :mod:`gripdem.nn.interaction`; needs the exact frame).
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import lightning as L
@@ -33,6 +32,8 @@ from gripdem.models import decoder_modes as modes
 from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
 from gripdem.models.evaluation import RolloutEvaluation
+from gripdem.models.training import TrainingSteps
+from gripdem.nn.direct import DirectDecoder
 from gripdem.nn.graph_conv import EdgeGraph, GraphConvEncoder
 from gripdem.nn.interaction import ContactGraph, InteractionEncoder
 from gripdem.nn.seq2seq import TrajectoryDecoder
@@ -53,6 +54,7 @@ ENCODER_OPTIONS = {
     "interaction": ("channels", "rounds", "edge_history", "position_features"),
 }
 LR_SCHEDULES = ("constant", "cosine")
+DECODERS = ("gru", "direct")
 POSITION_FEATURES = ("auto", "true", "false")
 
 
@@ -75,7 +77,7 @@ def _uses_position_features(setting: Any, boundary: Boundary) -> bool:
     return not boundary.is_lees_edwards if setting == "auto" else setting == "true"
 
 
-class TrajectoryModule(RolloutEvaluation, L.LightningModule):
+class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
     """GRIP++ / PCT / VCT on a graph encoder and the seq2seq GRU block.
 
     Args:
@@ -94,6 +96,12 @@ class TrajectoryModule(RolloutEvaluation, L.LightningModule):
             the per-step velocity change (0: off).
         ar_prior: exact frame: add the linear AR forecast's deviation from CV to the output
             through a learned gate ``(horizon, 3)`` that starts at zero (needs ``linear_ar``).
+        decoder: ``gru`` (the seq2seq GRU block) | ``direct`` (every horizon step at once from
+            the context vector, :mod:`gripdem.nn.direct`; exact-frame grip with the interaction
+            encoder only).
+        zero_mean: exact frame: remove the mean over particles of the deviation from CV at every
+            step (the truth's mean displacement equals CV's: pair forces cancel and the drag's
+            mean flow has a fixed average, SPEC §12), so a rollout cannot drift as a whole.
         n_particles: needed only by ``trainable_graph=dense``.
         graph_cutoff: the graph's cut-off in diameters (scales the edge features).
         profile: mean-flow baseline profile (``cosine`` | ``linear``; default by boundary).
@@ -121,6 +129,8 @@ class TrajectoryModule(RolloutEvaluation, L.LightningModule):
         warmup_fraction: float = 0.05,
         input_noise: float = 0.0,
         ar_prior: bool = False,
+        decoder: str = "gru",
+        zero_mean: bool = False,
         n_particles: int | None = None,
         graph_cutoff: float = 3.0,
         profile: str | None = None,
@@ -161,24 +171,50 @@ class TrajectoryModule(RolloutEvaluation, L.LightningModule):
         self.position_features = False  # x-position node features (interaction encoder)
         self.encoder_name, self.encoder = self._build_encoder(dict(encoder or {}), n_particles)
         lay = modes.layout(decoder_mode, self.encoding, self.normalizer)
-        self.decoder = TrajectoryDecoder(
+        self.decoder = self._build_decoder(decoder, lay, hidden, layers, n_heads, decoder_dropout)
+        self.register_buffer(
+            "change_std", torch.tensor(self.normalizer.change_std or (1.0,), dtype=torch.float64)
+        )
+        if zero_mean and not self.exact:
+            raise ValueError(
+                "model.zero_mean=true needs the exact frame (model.encoding=unwrapped)"
+            )
+        self._eval_store: dict[str, list] = {}
+        self.accuracy_curve: list[tuple[float, int, float]] = []
+        self._fit_started: float | None = None
+
+    def _build_decoder(self, kind, lay, hidden, layers, n_heads, dropout):
+        if kind not in DECODERS:
+            raise ValueError(f"model.decoder must be one of {DECODERS}, got {kind!r}")
+        if kind == "direct":
+            if not (
+                self.exact
+                and self.hparams.decoder_mode == "grip"
+                and self.encoder.context == "vector"
+            ):
+                raise ValueError(
+                    "model.decoder=direct needs the exact frame, decoder_mode=grip and the "
+                    "interaction encoder (one context vector per particle)"
+                )
+            return DirectDecoder(
+                self.encoder.out_channels,
+                lay.state_channels,
+                lay.out_channels,
+                int(self.hparams.horizon),
+                hidden,
+            )
+        return TrajectoryDecoder(
             self.encoder.out_channels,
             lay.state_channels,
             lay.out_channels,
             hidden=hidden,
             layers=layers,
             n_heads=n_heads,
-            dropout=decoder_dropout,
+            dropout=dropout,
             fold=lay.fold,
             shift=lay.shift,
             context=self.encoder.context,
         )
-        self.register_buffer(
-            "change_std", torch.tensor(self.normalizer.change_std or (1.0,), dtype=torch.float64)
-        )
-        self._eval_store: dict[str, list] = {}
-        self.accuracy_curve: list[tuple[float, int, float]] = []
-        self._fit_started: float | None = None
 
     def _build_encoder(self, cfg: dict[str, Any], n_particles: int | None):
         """The encoder named ``cfg["name"]`` with its own options (the shared config schema
@@ -252,10 +288,15 @@ class TrajectoryModule(RolloutEvaluation, L.LightningModule):
         drift = None
         if self.exact and mode != "grip":
             drift = modes.state_drift(mode, self.encoding, modes.last_step(batch, self.boundary))
-        outputs = self.decoder(features, state, base, self.hparams.horizon, drift)
+        if self.hparams.decoder == "direct":
+            outputs = self.decoder(features, state)
+        else:
+            outputs = self.decoder(features, state, base, self.hparams.horizon, drift)
         deviation = modes.outputs_to_deltas(mode, self.exact, outputs, batch.inputs)
         if self.ar_gate is not None:
             deviation = deviation + self.ar_gate * self.ar_deviation(batch)
+        if self.hparams.zero_mean:
+            deviation = deviation - deviation.mean(dim=1, keepdim=True)
         return deviation
 
     def ar_deviation(self, batch) -> torch.Tensor:
@@ -307,73 +348,3 @@ class TrajectoryModule(RolloutEvaluation, L.LightningModule):
         else:
             positions = self.encoding.decode(last, deltas, offsets)
         return positions.transpose(1, 2)
-
-    def true_deviation(self, batch, dtype: torch.dtype = torch.float32) -> torch.Tensor:
-        """Exact frame: the true per-step deviation from CV in units of the velocity change
-        ``(B, N, f, 3)`` (computed in float64, returned as ``dtype``)."""
-        steps = modes.target_steps(batch, self.boundary)
-        v0 = modes.last_step(batch, self.boundary)[:, :, None]
-        return ((steps - v0) / self.change_std).to(dtype)
-
-    def _loss(self, pred: torch.Tensor, batch) -> torch.Tensor:
-        mode = self.hparams.decoder_mode
-        if self.exact:
-            return modes.exact_loss(mode, pred, self.true_deviation(batch))
-        pred, true = modes.loss_terms(mode, self.hparams.vct_shift, pred, batch.target_deltas)
-        return torch.mean((pred - true) ** 2)
-
-    # ----------------------------------------------------------------------------------------
-    # steps
-    # ----------------------------------------------------------------------------------------
-    def on_train_start(self) -> None:
-        self._fit_started = time.perf_counter()
-
-    def training_step(self, batch, batch_idx: int) -> torch.Tensor:
-        loss = self._loss(self(batch), batch)
-        if not torch.isfinite(loss):
-            raise FloatingPointError(
-                f"non-finite training loss ({loss.item()}) at global step {self.global_step} "
-                f"(epoch {self.current_epoch}, batch {batch_idx}); the last good checkpoint is "
-                "kept in the run's checkpoints/ folder; lower model.lr or enable gradient "
-                "clipping (trainer.gradient_clip_val)"
-            )
-        self.log("train/loss", loss, prog_bar=True, batch_size=batch.inputs.shape[0])
-        return loss
-
-    def on_before_optimizer_step(self, optimizer) -> None:
-        """Stop at the step whose gradients are non-finite (an overflow with a finite loss),
-        before the optimiser writes NaN into the weights: clipping cannot repair an infinite
-        norm, and the loss would only turn NaN one step later."""
-        grads = [(name, p.grad) for name, p in self.named_parameters() if p.grad is not None]
-        if not grads or bool(torch.stack([torch.isfinite(g).all() for _, g in grads]).all()):
-            return  # one host sync per step; the parameter is named only on failure
-        for name, grad in grads:
-            if not torch.isfinite(grad).all():
-                raise FloatingPointError(
-                    f"non-finite gradient of {name} at global step {self.global_step} (epoch "
-                    f"{self.current_epoch}); the weights were not updated and the last good "
-                    "checkpoint is kept in the run's checkpoints/ folder; lower model.lr or "
-                    "check this batch's data"
-                )
-
-    def configure_optimizers(self):
-        params = self.parameters()
-        if self.hparams.weight_decay > 0:
-            opt = torch.optim.AdamW(
-                params, lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
-            )
-        else:
-            opt = torch.optim.Adam(params, lr=self.hparams.lr)
-        if self.hparams.lr_schedule == "constant":
-            return opt
-        total = max(1, int(self.trainer.estimated_stepping_batches))
-        warmup = max(1, int(self.hparams.warmup_fraction * total))
-
-        def factor(step: int) -> float:
-            if step < warmup:
-                return (step + 1) / warmup
-            progress = min(1.0, (step - warmup) / max(1, total - warmup))
-            return 0.5 * (1.0 + math.cos(math.pi * progress))
-
-        scheduler = torch.optim.lr_scheduler.LambdaLR(opt, factor)
-        return {"optimizer": opt, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}

@@ -87,10 +87,11 @@ class PairMLP(nn.Module):
         """h ``(nodes, C)``, x ``(E, C_e)``, edge_index ``(2, E)`` -> ``(E, n_out)``."""
         i, j = edge_index
         # index_select, not h[i]: its backward is an index_add, advanced indexing's is a
-        # much slower accumulating index_put on the CPU
-        first = (
-            self.receiver(h).index_select(0, i) + self.sender(h).index_select(0, j) + self.edge(x)
-        )
+        # much slower accumulating index_put on the CPU; the sums go in place into the edge
+        # term (no (E, hidden) temporaries; addition needs no saved inputs for autograd)
+        first = self.edge(x)
+        first += self.receiver(h).index_select(0, i)
+        first += self.sender(h).index_select(0, j)
         return self.out(nn.functional.silu(first))
 
 

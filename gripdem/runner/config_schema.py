@@ -119,6 +119,8 @@ class ModelSchema:
     warmup_fraction: float = 0.05
     input_noise: float = 0.0
     ar_prior: bool = False
+    decoder: str = "gru"
+    zero_mean: bool = False
 
 
 @dataclass

@@ -12,6 +12,7 @@ import torch
 from gripdem.data.dataset_io import read_meta
 from gripdem.inference.checkpoint import load_model
 from gripdem.inference.rollout import rollout
+from gripdem.inference.stepper import StepperSettings
 from gripdem.models.baselines import constant_velocity
 
 
@@ -32,7 +33,8 @@ def test_chained_untrained_model_is_the_one_shot_constant_velocity_rollout(reque
     model = load_model(request.getfixturevalue(f"{scene}_checkpoint"), meta)
     meta, observed, times = observed_window(path, model)
     frames = 47  # beyond the file's 40 frames: times continue at the frame interval
-    run = rollout(model, meta, observed, times, frames, step, check_overlap=False)
+    settings = StepperSettings(link=step, contact_correction=False)
+    run = rollout(model, meta, observed, times, frames, settings, check_overlap=False)
     assert run.positions.shape == (3, observed.shape[1] + frames, 24, 3)
     assert np.allclose(np.diff(run.times, axis=1), meta.frame_interval, rtol=1e-9)
     in_off = meta.boundary.offset(times)
@@ -52,7 +54,8 @@ def test_divergence_is_flagged_and_the_rollout_ends_cleanly(le_file, le_checkpoi
         for name, p in model.named_parameters():
             if name.endswith("head.bias"):
                 p.fill_(1e4)  # a runaway model: huge velocity changes every step
-    run = rollout(model, meta, observed, times, 12, overlap_margin=0.05)
+    raw = StepperSettings(contact_correction=False)  # the model's own frames are judged
+    run = rollout(model, meta, observed, times, 12, raw, overlap_margin=0.05)
     assert run.n_predicted == 12 and np.isfinite(run.positions).all()
     assert run.divergence.first["escaped"] == 1
     assert run.divergence.first["overlap"] >= 1
@@ -61,7 +64,7 @@ def test_divergence_is_flagged_and_the_rollout_ends_cleanly(le_file, le_checkpoi
         for name, p in model.named_parameters():
             if name.endswith("head.bias"):
                 p.fill_(float("nan"))
-    run = rollout(model, meta, observed, times, 12)
+    run = rollout(model, meta, observed, times, 12, raw)
     assert run.divergence.first == {"non_finite": 1}
     assert "non-finite" in run.divergence.stopped
     assert run.n_predicted == 0 and np.isfinite(run.positions).all()
@@ -72,5 +75,5 @@ def test_link_length_must_fit_the_horizon(le_file, le_checkpoint):
     meta = read_meta(le_file)
     model = load_model(le_checkpoint, meta)
     _, observed, times = observed_window(le_file, model)
-    with pytest.raises(ValueError, match="--step must lie in 1..5"):
-        rollout(model, meta, observed, times, 10, step=6)
+    with pytest.raises(ValueError, match="link must lie in 1..5"):
+        rollout(model, meta, observed, times, 10, StepperSettings(link=6))

@@ -207,3 +207,52 @@ def test_ar_prior_needs_the_exact_frame_and_the_filter(crossing_paths):
     dm = _datamodule(crossing_paths["pbc"], "6-4", 4)
     with pytest.raises(ValueError, match="ar_prior"):
         module(dm, "grip", "graph_conv", ar_prior=True)
+
+
+@pytest.mark.parametrize("scene", ["lebc", "pbc"])
+def test_direct_decoder_and_zero_mean_start_at_cv(crossing_paths, scene):
+    """The direct multi-step head starts at zero (the model is CV, crossers included), alone and
+    with the AR prior and the zero-mean constraint."""
+    dm = _datamodule(crossing_paths[scene], "6-4", 4)
+    ar = fit_on_training_frames(dm, 2)
+    model = module(
+        dm,
+        "grip",
+        "interaction",
+        decoder="direct",
+        zero_mean=True,
+        ar_prior=True,
+        linear_ar=ar.to_dict(),
+    )
+    for batch in dm.test_dataloader():
+        with torch.no_grad():
+            pred = model.decode(model(batch), batch)
+        assert (
+            _max_difference(pred, _cv(batch, dm.meta.box), dm.meta.box, batch.target_offsets)
+            < 1e-13
+        )
+
+
+@pytest.mark.parametrize("decoder", ["gru", "direct"])
+def test_zero_mean_removes_any_net_deviation(crossing_paths, decoder):
+    """A perturbed model's deviation from CV averages to zero over the particles at every step
+    (the truth's does, to round-off), so its centre of mass moves exactly as CV's."""
+    dm = _datamodule(crossing_paths["lebc"], "6-4", 4)
+    model = module(dm, "grip", "interaction", decoder=decoder, zero_mean=True)
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(0.1 * torch.randn_like(p))
+        batch = next(iter(dm.test_dataloader()))
+        deviation = model(batch)
+    assert deviation.abs().max() > 1e-2
+    assert deviation.mean(dim=1).abs().max() < 1e-6
+
+
+def test_direct_decoder_needs_exact_grip_with_the_interaction_encoder(crossing_paths):
+    dm = _datamodule(crossing_paths["pbc"], "6-4", 4)
+    with pytest.raises(ValueError, match="model.decoder=direct"):
+        module(dm, "pct", "interaction", decoder="direct")
+    with pytest.raises(ValueError, match="model.decoder=direct"):
+        module(dm, "grip", "graph_conv", decoder="direct")
+    with pytest.raises(ValueError, match="model.decoder must be one of"):
+        module(dm, "grip", "interaction", decoder="lstm")

@@ -1,0 +1,218 @@
+"""The in-memory stepper: a trained model advanced frame after frame with its state in memory.
+
+State per simulation: the last ``K + 1`` frames (wrapped, float64), their absolute times (the
+LE offsets follow from them in float64), and a neighbour list with a skin
+(:class:`gripdem.boundary.NeighbourList`, LE-aware, rebuilt only when a pair outside it could
+have come within the cut-off). One *link* is one forward pass of the model: its inputs are built
+from the state (steps, normalisation, the graph from the neighbour list), it predicts its
+horizon ``f``, and the first ``link <= f`` frames are kept. Each kept frame then
+
+1. is moved by the corrections of the frames before it in the link (a corrected particle keeps
+   its new position; the model's velocity for it stays), and wrapped with its own offset;
+2. moves the neighbour list to it and, with ``contact_correction``, has its overlapping pairs
+   pushed apart (:mod:`gripdem.inference.contacts`);
+3. joins the state as the newest frame.
+
+No HDF5 read and no dataset object per link: :func:`gripdem.inference.rollout.rollout`,
+``gripdem.predict``, the runner's test step and the benchmarks all step through here.
+:attr:`Stepper.seconds` accumulates the wall time of each part (neighbour list, features,
+forward, decode and wrap, correction).
+
+Shapes: ``S`` simulations advanced together (one batch), ``N`` particles; frames
+``(S, frames, N, 3)``, times ``(S, frames)``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from gripdem.boundary import NeighbourList, minimum_image, wrap_positions
+from gripdem.data.batch import inference_batch
+from gripdem.data.graph import graph_from_pairs
+from gripdem.inference.contacts import Correction, push_apart
+
+PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction")
+
+
+@dataclass
+class StepperSettings:
+    """How a model is advanced (the stable setting is the default of predict and the runner).
+
+    link: frames kept per forward pass (None: the model's horizon). contact_correction: push
+    overlapping pairs apart after every frame; contact_distance: the closest centre distance
+    allowed, in diameters; correction_sweeps: at most this many Gauss-Seidel sweeps. skin: of the
+    neighbour list, in diameters.
+    """
+
+    link: int | None = None
+    contact_correction: bool = True
+    contact_distance: float = 1.0
+    correction_sweeps: int = 20
+    skin: float = 0.3
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class StepReport:
+    """Per kept frame: the correction's counts (empty lists without correction)."""
+
+    overlapping_before: list[int] = field(default_factory=list)
+    worst_overlap_before: list[float] = field(default_factory=list)
+    overlapping_after: list[int] = field(default_factory=list)
+    rms_push_over_d: list[float] = field(default_factory=list)
+
+
+class Stepper:
+    """Advance ``model`` from ``observed`` frames ``(S, K+1, N, 3)`` at ``times (S, K+1)``."""
+
+    def __init__(self, model, observed: np.ndarray, times: np.ndarray, settings=None):
+        self.model = model.eval()
+        self.settings = settings or StepperSettings()
+        self.k = int(model.hparams.history_len)
+        self.f = int(model.hparams.horizon)
+        self.link = self.f if self.settings.link is None else int(self.settings.link)
+        if not 1 <= self.link <= self.f:
+            raise ValueError(f"link must lie in 1..{self.f} (the model's horizon), got {self.link}")
+        observed = np.asarray(observed, dtype=np.float64)
+        if observed.ndim != 4 or observed.shape[1] != self.k + 1 or observed.shape[-1] != 3:
+            raise ValueError(
+                f"the model reads {self.k + 1} observed frames: expected (sims, {self.k + 1}, "
+                f"particles, 3), got {observed.shape}"
+            )
+        self.boundary = model.boundary
+        self.box = model.boundary.box
+        self.d = float(model.diameter)
+        self.dt = float(model.hparams.scene["frame_interval"])
+        self.frames = observed.copy()
+        self.times = np.asarray(times, dtype=np.float64).copy()
+        self.cutoff = float(model.hparams.graph_cutoff) * self.d
+        radius = max(self.cutoff, self.settings.contact_distance * self.d)
+        self.lists = [
+            NeighbourList(
+                self.box, radius, self.settings.skin * self.d, self.boundary.image_velocity
+            )
+            for _ in range(len(observed))
+        ]
+        for s, nl in enumerate(self.lists):
+            nl.build(
+                self.frames[s, -1], float(self.offsets(self.times[s, -1:])[0]), self.times[s, -1]
+            )
+        self.seconds = dict.fromkeys(PARTS, 0.0)
+        self.report = StepReport()
+        self.stopped: str | None = None
+        self.n_predicted = 0
+        self._pending: list | None = None  # the current link: frames, times, offsets, next, carry
+        self.device = next(model.parameters()).device
+
+    def offsets(self, times: np.ndarray) -> np.ndarray:
+        return self.boundary.offset(times)
+
+    @property
+    def n_sims(self) -> int:
+        return self.frames.shape[0]
+
+    # ---- one forward pass -----------------------------------------------------------------
+    def _batch(self):
+        """The model's input batch from the state (no targets)."""
+        s, _, n, _ = self.frames.shape
+        future = self.times[:, -1:] + self.dt * np.arange(1, self.f + 1)[None, :]
+        times = np.concatenate([self.times, future], axis=1)
+        offsets = self.offsets(times)
+        positions = self.frames.transpose(0, 2, 1, 3)  # (S, N, K+1, 3)
+        encoding = self.model.encoding
+        le = self.boundary.is_lees_edwards
+        steps = encoding.encode(positions, offsets[:, : self.k + 1] if le else None, anchor=self.k)
+        inputs = self.model.normalizer.normalize(steps).astype(np.float32)
+        graphs = []
+        for sim, nl in enumerate(self.lists):
+            i, j, vec = nl.pairs(self.times[sim, -1], self.cutoff)
+            graphs.append(graph_from_pairs(i, j, vec, n, length_unit=self.d))
+        return inference_batch(inputs, positions, times, offsets, graphs), offsets
+
+    @torch.no_grad()
+    def _predict(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One link: predicted wrapped frames ``(S, f, N, 3)``, their times and offsets."""
+        started = time.perf_counter()
+        batch, offsets = self._batch()
+        self.seconds["features"] += time.perf_counter() - started
+        started = time.perf_counter()
+        batch = batch.to(self.device)
+        out = self.model(batch)
+        self.seconds["forward"] += time.perf_counter() - started
+        started = time.perf_counter()
+        predicted = self.model.decode(out, batch).cpu().numpy()
+        self.seconds["decode_wrap"] += time.perf_counter() - started
+        future_times = batch.times[:, self.k + 1 :].cpu().numpy()
+        return predicted, future_times, offsets[:, self.k + 1 :]
+
+    # ---- frames ---------------------------------------------------------------------------
+    def _accept(self, frame: np.ndarray, times: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """Move the lists to a predicted frame ``(S, N, 3)``, correct it, add it to the state;
+        returns the frame as kept."""
+        kept = frame.copy()
+        for sim, nl in enumerate(self.lists):
+            started = time.perf_counter()
+            nl.update(frame[sim], float(offsets[sim]), float(times[sim]))
+            self.seconds["neighbour_list"] += time.perf_counter() - started
+            if self.settings.contact_correction:
+                started = time.perf_counter()
+                corr = self._correct(nl, float(times[sim]), float(offsets[sim]))
+                self._record(corr, sim)
+                kept[sim] = wrap_positions(nl.q, self.box, float(offsets[sim]))
+                self.seconds["correction"] += time.perf_counter() - started
+        self.frames = np.concatenate([self.frames[:, 1:], kept[:, None]], axis=1)
+        self.times = np.concatenate([self.times[:, 1:], times[:, None]], axis=1)
+        return kept
+
+    def _correct(self, nl: NeighbourList, time: float, offset: float) -> Correction:
+        """Push overlapping pairs apart; when the pushes made the list stale, rebuild it at the
+        corrected frame and correct again (pairs it did not hold may touch now)."""
+        distance = self.settings.contact_distance * self.d
+        corr = push_apart(nl, time, distance, self.settings.correction_sweeps)
+        if nl.stale(nl.q, time):
+            nl.build(wrap_positions(nl.q, self.box, offset), offset, time)
+            again = push_apart(nl, time, distance, self.settings.correction_sweeps)
+            corr.overlapping_after, corr.worst_after = again.overlapping_after, again.worst_after
+        return corr
+
+    def _record(self, corr: Correction, sim: int) -> None:
+        if sim == 0:  # per frame: summed over the simulations
+            for name in ("overlapping_before", "worst_overlap_before", "overlapping_after"):
+                getattr(self.report, name).append(0)
+            self.report.rms_push_over_d.append(0.0)
+        r = self.report
+        r.overlapping_before[-1] += corr.overlapping_before
+        r.worst_overlap_before[-1] = max(r.worst_overlap_before[-1], corr.worst_before)
+        r.overlapping_after[-1] += corr.overlapping_after
+        r.rms_push_over_d[-1] += corr.rms_push / self.d / self.n_sims
+
+    def advance(self, count: int) -> np.ndarray:
+        """Predict ``count`` more frames; returns them ``(S, count, N, 3)`` as kept, or fewer
+        when the model predicts a non-finite position (:attr:`stopped` then says where). A link
+        is predicted when the previous one's kept frames are used up, so frames can be asked
+        for one at a time at no extra cost."""
+        out = []
+        while len(out) < count and self.stopped is None:
+            if self._pending is None or self._pending[3] >= self.link:
+                predicted, times, offsets = self._predict()
+                self._pending = [predicted, times, offsets, 0, np.zeros_like(predicted[:, 0])]
+            predicted, times, offsets, j, carry = self._pending
+            moved = predicted[:, j] + carry
+            if not np.isfinite(moved).all():
+                self.stopped = f"non-finite positions predicted {self.n_predicted + 1} frames in"
+                break
+            frame = wrap_positions(moved, self.box, offsets[:, j, None])
+            kept = self._accept(frame, times[:, j], offsets[:, j])
+            self._pending[4] = carry + minimum_image(kept - frame, self.box, offsets[:, j, None])
+            self._pending[3] = j + 1
+            self.n_predicted += 1
+            out.append(kept)
+        if not out:
+            return np.zeros(self.frames.shape[:1] + (0,) + self.frames.shape[2:])
+        return np.stack(out, axis=1)

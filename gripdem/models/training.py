@@ -1,0 +1,90 @@
+"""Training of a trajectory model: the loss of its decoder mode (relative to constant velocity's
+in the exact frame), the training step with its non-finite checks, and the optimiser with its
+learning-rate schedule.
+
+:class:`TrainingSteps` is a mixin of :class:`gripdem.models.module.TrajectoryModule`: it reads
+the module's ``boundary``, ``exact``, ``change_std`` and its ``forward``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import torch
+
+from gripdem.models import decoder_modes as modes
+
+
+class TrainingSteps:
+    """Loss, training step, gradient checks and optimiser (see the module doc)."""
+
+    def true_deviation(self, batch, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+        """Exact frame: the true per-step deviation from CV in units of the velocity change
+        ``(B, N, f, 3)`` (computed in float64, returned as ``dtype``)."""
+        steps = modes.target_steps(batch, self.boundary)
+        v0 = modes.last_step(batch, self.boundary)[:, :, None]
+        return ((steps - v0) / self.change_std).to(dtype)
+
+    def _loss(self, pred: torch.Tensor, batch) -> torch.Tensor:
+        mode = self.hparams.decoder_mode
+        if self.exact:
+            return modes.exact_loss(mode, pred, self.true_deviation(batch))
+        pred, true = modes.loss_terms(mode, self.hparams.vct_shift, pred, batch.target_deltas)
+        return torch.mean((pred - true) ** 2)
+
+    # ----------------------------------------------------------------------------------------
+    # steps
+    # ----------------------------------------------------------------------------------------
+    def on_train_start(self) -> None:
+        self._fit_started = time.perf_counter()
+
+    def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        loss = self._loss(self(batch), batch)
+        if not torch.isfinite(loss):
+            raise FloatingPointError(
+                f"non-finite training loss ({loss.item()}) at global step {self.global_step} "
+                f"(epoch {self.current_epoch}, batch {batch_idx}); the last good checkpoint is "
+                "kept in the run's checkpoints/ folder; lower model.lr or enable gradient "
+                "clipping (trainer.gradient_clip_val)"
+            )
+        self.log("train/loss", loss, prog_bar=True, batch_size=batch.inputs.shape[0])
+        return loss
+
+    def on_before_optimizer_step(self, optimizer) -> None:
+        """Stop at the step whose gradients are non-finite (an overflow with a finite loss),
+        before the optimiser writes NaN into the weights: clipping cannot repair an infinite
+        norm, and the loss would only turn NaN one step later."""
+        grads = [(name, p.grad) for name, p in self.named_parameters() if p.grad is not None]
+        if not grads or bool(torch.stack([torch.isfinite(g).all() for _, g in grads]).all()):
+            return  # one host sync per step; the parameter is named only on failure
+        for name, grad in grads:
+            if not torch.isfinite(grad).all():
+                raise FloatingPointError(
+                    f"non-finite gradient of {name} at global step {self.global_step} (epoch "
+                    f"{self.current_epoch}); the weights were not updated and the last good "
+                    "checkpoint is kept in the run's checkpoints/ folder; lower model.lr or "
+                    "check this batch's data"
+                )
+
+    def configure_optimizers(self):
+        params = self.parameters()
+        if self.hparams.weight_decay > 0:
+            opt = torch.optim.AdamW(
+                params, lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
+            )
+        else:
+            opt = torch.optim.Adam(params, lr=self.hparams.lr)
+        if self.hparams.lr_schedule == "constant":
+            return opt
+        total = max(1, int(self.trainer.estimated_stepping_batches))
+        warmup = max(1, int(self.hparams.warmup_fraction * total))
+
+        def factor(step: int) -> float:
+            if step < warmup:
+                return (step + 1) / warmup
+            progress = min(1.0, (step - warmup) / max(1, total - warmup))
+            return 0.5 * (1.0 + math.cos(math.pi * progress))
+
+        scheduler = torch.optim.lr_scheduler.LambdaLR(opt, factor)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}

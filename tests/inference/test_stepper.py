@@ -1,0 +1,109 @@
+"""The in-memory stepper predicts what the dataset path predicts, to round-off: a perturbed
+model (every weight moved, so every layer matters) on the built-in DEM's tiny scenes, one link
+and chained links, across LE crossings and neighbour-list rebuilds. The contact correction
+removes overlaps without moving the centre of mass."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from stress_models import perturb, smoke_model
+
+from gripdem.boundary import NeighbourList, minimum_image
+from gripdem.data.batch import collate_windows
+from gripdem.data.dataset import WindowDataset
+from gripdem.data.windows import Segment, WindowIndex
+from gripdem.inference.contacts import push_apart
+from gripdem.inference.stepper import Stepper, StepperSettings
+
+# a thin skin: the lists are rebuilt several times within the links compared
+RAW = StepperSettings(contact_correction=False, skin=0.05)
+
+
+class BufferReader:
+    """Frames from memory with the file reader's interface."""
+
+    def __init__(self, positions):
+        self.positions = positions
+
+    def read(self, sim, start, stop):
+        return self.positions[sim, start:stop]
+
+    def close(self):
+        pass
+
+
+def dataset_prediction(model, dm, positions, times, start):
+    """The dataset path's prediction of the window starting at ``start`` of ``positions``
+    ``(S, T, N, 3)`` (each simulation one window): a fresh graph search, the file encoding."""
+    k, f = int(model.hparams.history_len), int(model.hparams.horizon)
+    windows = WindowIndex([Segment(s, start, 1, 1) for s in range(len(positions))], k, f)
+    ds = WindowDataset(
+        BufferReader(positions),
+        dm.meta,
+        times,
+        windows,
+        model.encoding,
+        model.normalizer,
+        dm.graph_cutoff * dm.meta.diameter,
+        graph_cache_mb=0.0,
+    )
+    batch = collate_windows([ds[i] for i in range(len(ds))])
+    with torch.no_grad():
+        return model.decode(model(batch), batch).numpy()
+
+
+@pytest.mark.parametrize("scene", ["pbc", "lebc"])
+def test_stepper_links_equal_the_dataset_path(request, scene):
+    path = request.getfixturevalue(f"tiny_{scene}_path")
+    model, dm = smoke_model(path, f"scene={scene}")
+    perturb(model, scale=0.02)
+    k, f = int(model.hparams.history_len), int(model.hparams.horizon)
+    reader = dm.datasets["test"].reader
+    sims = list(dm.plan.test.sims)
+    times = dm._times[sims]
+    frames = np.stack([reader.read(s, 0, dm.meta.n_frames) for s in sims])
+    stepper = Stepper(model, frames[:, : k + 1], times[:, : k + 1], RAW)
+    links = 4
+    predicted = stepper.advance(links * f)
+    # the reference: each link's window rebuilt from the frames predicted before it
+    buffer = np.concatenate([frames[:, : k + 1], predicted], axis=1)
+    ext_times = times[:, :1] + dm.meta.frame_interval * np.arange(buffer.shape[1])[None]
+    box = dm.meta.box
+    offsets = dm.meta.boundary.offset(ext_times)
+    for link in range(links):
+        want = dataset_prediction(model, dm, buffer, ext_times, link * f)
+        got = predicted[:, link * f : (link + 1) * f]
+        diff = minimum_image(
+            got - want, box, offsets[:, k + 1 + link * f : k + 1 + (link + 1) * f, None]
+        )
+        assert np.abs(diff).max() < 1e-9 * dm.meta.diameter, link
+    assert np.abs(predicted[:, -1] - frames[:, k + links * f]).max() > 0.01 * dm.meta.diameter
+    assert sum(nl.builds for nl in stepper.lists) > len(sims)  # lists were rebuilt on the way
+    if scene == "lebc":
+        moves = np.abs(np.diff(buffer[..., 0], axis=1))
+        assert (moves > 0.5 * box.lx).sum() > 0  # particles crossed the LE faces
+
+
+def test_contact_correction_pushes_overlapping_pairs_apart():
+    """A jittered simple-cubic lattice of spacing 1 in a box of 1.05 per particle (many
+    neighbours overlap; a solution exists): after the correction
+    no pair is closer than the contact distance (to the tolerance) and the centre of mass has not
+    moved."""
+    from gripdem.boundary import Box, brute_force_pairs
+
+    rng = np.random.default_rng(3)
+    box = Box(8.4, 7.35, 9.45)
+    grid = np.stack(np.meshgrid(*(np.arange(k) for k in (8, 7, 9)), indexing="ij"), -1)
+    q = (grid.reshape(-1, 3) + 0.5) * 1.05 - 0.5 * box.lengths
+    q = q + rng.normal(0.0, 0.04, q.shape)
+    nl = NeighbourList(box, 1.0, 0.3, image_velocity=0.0)
+    nl.build(q, 0.0, 0.0)
+    before = nl.q.copy()
+    corr = push_apart(nl, 0.0, 1.0, sweeps=200, tolerance=1e-6)
+    assert corr.overlapping_before > 50 and corr.overlapping_after == 0
+    _, _, vec = brute_force_pairs(nl.q, box, 0.0, 1.0)
+    assert np.linalg.norm(vec, axis=1).min() > 1.0 - 1e-5
+    np.testing.assert_allclose(nl.q.mean(axis=0), before.mean(axis=0), atol=1e-12)
+    assert 0 < corr.rms_push < 0.1

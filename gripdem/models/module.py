@@ -102,6 +102,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
         zero_mean: exact frame: remove the mean over particles of the deviation from CV at every
             step (the truth's mean displacement equals CV's: pair forces cancel and the drag's
             mean flow has a fixed average, SPEC §12), so a rollout cannot drift as a whole.
+        history_noise: exact frame: random-walk noise on the observed frames during training,
+            final std in diameters (:mod:`gripdem.models.history_noise`; 0: off).
         n_particles: needed only by ``trainable_graph=dense``.
         graph_cutoff: the graph's cut-off in diameters (scales the edge features).
         profile: mean-flow baseline profile (``cosine`` | ``linear``; default by boundary).
@@ -131,6 +133,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
         ar_prior: bool = False,
         decoder: str = "gru",
         zero_mean: bool = False,
+        history_noise: float = 0.0,
         n_particles: int | None = None,
         graph_cutoff: float = 3.0,
         profile: str | None = None,
@@ -175,6 +178,10 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
         self.register_buffer(
             "change_std", torch.tensor(self.normalizer.change_std or (1.0,), dtype=torch.float64)
         )
+        if history_noise and not self.exact:
+            raise ValueError(
+                "model.history_noise > 0 needs the exact frame (model.encoding=unwrapped)"
+            )
         if zero_mean and not self.exact:
             raise ValueError(
                 "model.zero_mean=true needs the exact frame (model.encoding=unwrapped)"

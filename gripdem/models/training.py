@@ -14,6 +14,7 @@ import time
 import torch
 
 from gripdem.models import decoder_modes as modes
+from gripdem.models.history_noise import noisy_history
 
 
 class TrainingSteps:
@@ -40,6 +41,9 @@ class TrainingSteps:
         self._fit_started = time.perf_counter()
 
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        sigma = float(self.hparams.history_noise)
+        if sigma > 0:
+            batch = noisy_history(batch, sigma, self.diameter, self.boundary, self.normalizer)
         loss = self._loss(self(batch), batch)
         if not torch.isfinite(loss):
             raise FloatingPointError(

@@ -121,6 +121,7 @@ class ModelSchema:
     ar_prior: bool = False
     decoder: str = "gru"
     zero_mean: bool = False
+    history_noise: float = 0.0
 
 
 @dataclass

@@ -111,7 +111,7 @@ def block_statistics(
     boundary: Boundary,
     diameter: float,
     block: int = 100,
-    gr_every: int = 5,
+    gr_every: int = 2,
 ) -> dict:
     """Per-block statistics of ``model`` beside ``truth`` (see the module doc)."""
     if model.shape != truth.shape:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +57,9 @@ class TrajectoryDataModule(L.LightningDataModule):
 
     ``graph_cutoff`` is in particle diameters (SPEC §2: D = 3 d). ``expect_boundary``
     (``periodic`` | ``lees_edwards``), when given, must match the file's boundary.
+    ``model_horizon`` (``model.horizon``): a model that predicts fewer frames than the split's
+    horizon trains and validates on windows of its own horizon; the test windows keep the
+    split's, and the runner chains the model over them (:mod:`gripdem.runner.chained_test`).
     """
 
     def __init__(
@@ -76,6 +80,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         graph_alpha: float = DEFAULT_ALPHA,
         graph_cache_mb: float = 256.0,
         memory_mb: float = 2048.0,
+        model_horizon: int | None = None,
         batch_size: int = 1,
         num_workers: int = 0,
         pin_memory: bool = False,
@@ -109,6 +114,16 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.graph_alpha = float(graph_alpha)
         self.graph_cache_mb = float(graph_cache_mb)
         self.memory_mb = float(memory_mb)
+        if model_horizon is not None and int(model_horizon) < 1:
+            raise ValueError(
+                f"model.horizon must be a positive number of frames or null, got {model_horizon}"
+            )
+        # a model horizon beyond the split's is the split's (nothing to chain)
+        self.model_horizon = (
+            self.split.horizon
+            if model_horizon is None
+            else min(int(model_horizon), self.split.horizon)
+        )
         self.batch_size = int(batch_size)
         self.num_workers = int(num_workers)
         self.pin_memory = bool(pin_memory)
@@ -151,6 +166,11 @@ class TrajectoryDataModule(L.LightningDataModule):
             times = np.asarray(h5["times"][()], dtype=np.float64)
         self.meta = meta
         self.plan = plan_windows(meta.n_sims, meta.n_frames, self.split, **self.plan_args)
+        if self.model_horizon < self.split.horizon:
+            # train and validate on the model's own horizon; test on the split's (chained)
+            short = Split(self.split.history, self.model_horizon)
+            own = plan_windows(meta.n_sims, meta.n_frames, short, **self.plan_args)
+            self.plan = replace(self.plan, train=own.train, val=own.val)
         self.encoding = make_encoding(self.encoding_name, meta.boundary)
         reader = FrameReader(self.path)
         self._reader, self._times = reader, times

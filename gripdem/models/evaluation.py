@@ -45,11 +45,16 @@ class RolloutEvaluation:
             raise FloatingPointError(
                 f"non-finite predicted positions in {stage} at global step {self.global_step}"
             )
+        self.record(batch, positions, float(loss), stage)
+
+    def record(self, batch, positions: torch.Tensor, loss: float, stage: str) -> None:
+        """Keep one batch's predicted wrapped positions ``(B, f, N, 3)`` beside its truth and
+        every baseline, for the stage's metrics (also fed by chained rollouts)."""
         store = self._eval_store.setdefault(stage, [])
         target = batch.target_positions.double().transpose(1, 2)
         offsets = batch.target_offsets.double() if self.boundary.is_lees_edwards else None
         record = {
-            "loss": float(loss),
+            "loss": loss,
             "n": batch.inputs.shape[0],
             "pred": positions.detach().cpu(),
             "true": target.cpu(),
@@ -113,15 +118,21 @@ class RolloutEvaluation:
             )
         return metrics
 
-    def _end_of_eval(self, stage: str) -> dict[str, Any]:
+    def results(self, stage: str) -> dict[str, Any]:
+        """The recorded batches of a stage, collected, with their metrics under ``metrics``."""
         data = self._collected(stage)
+        if data:
+            data["metrics"] = self.stage_metrics(stage, data)
+        return data
+
+    def _end_of_eval(self, stage: str) -> dict[str, Any]:
+        data = self.results(stage)
         if not data:
             return {}
-        metrics = self.stage_metrics(stage, data)
+        metrics = data["metrics"]
         for key, value in metrics.items():
             if not math.isnan(value):
                 self.log(key, value, prog_bar=key == f"{stage}/rmse", sync_dist=True)
-        data["metrics"] = metrics
         return data
 
     def on_validation_epoch_end(self) -> None:

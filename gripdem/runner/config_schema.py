@@ -119,6 +119,7 @@ class ModelSchema:
     warmup_fraction: float = 0.05
     input_noise: float = 0.0
     ar_prior: bool = False
+    horizon: Optional[int] = None
     decoder: str = "gru"
     zero_mean: bool = False
     history_noise: float = 0.0
@@ -150,6 +151,7 @@ class DataSchema:
     graph_alpha: float = 0.001
     graph_cache_mb: float = 256.0
     memory_mb: float = 2048.0
+    model_horizon: Optional[int] = None
     batch_size: int = 1
     num_workers: int = 0
     pin_memory: bool = False

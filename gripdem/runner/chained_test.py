@@ -1,0 +1,41 @@
+"""The test step of a model whose horizon is shorter than the split's: chained, as a surrogate.
+
+A model that predicts ``f_model`` frames per forward pass (``model.horizon``, 10 for the default)
+is tested on the split's windows of ``f > f_model`` frames (150-50, 100-100) the way a user runs
+it beyond its horizon: :class:`gripdem.inference.stepper.Stepper` from each window's observed
+frames, in the stable setting (links of the model's horizon, contact correction after every
+frame), for the window's ``f`` frames. The predictions are recorded and scored exactly as the
+Lightning test step's (:meth:`gripdem.models.evaluation.RolloutEvaluation.record`), beside every
+baseline on the same windows, and logged to the run's logger.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+
+from gripdem.inference.stepper import Stepper, StepperSettings
+
+
+@torch.no_grad()
+def chained_test(model, dm, logger=None, step: int = 0, settings=None) -> dict[str, Any]:
+    """Test ``model`` on ``dm``'s test windows through the stepper; returns what the Lightning
+    test step leaves in ``model.test_results`` (collected arrays and ``metrics``)."""
+    model = model.eval()
+    settings = settings or StepperSettings()
+    for batch in dm.test_dataloader():
+        observed = batch.input_positions.transpose(1, 2).numpy()  # (B, K+1, N, 3)
+        stepper = Stepper(model, observed, batch.input_times.numpy(), settings)
+        predicted = stepper.advance(batch.horizon)
+        if stepper.stopped is not None:
+            raise FloatingPointError(f"chained test: {stepper.stopped}")
+        model.record(batch, torch.from_numpy(predicted), math.nan, "test")
+    results = model.results("test")
+    if logger is not None:
+        logger.log_metrics(
+            {k: v for k, v in results["metrics"].items() if not math.isnan(v)}, step=step
+        )
+    results["chained"] = {"model_horizon": int(model.hparams.horizon), **settings.to_dict()}
+    return results

@@ -62,3 +62,26 @@ def test_scene_cost_quick(run_script, tmp_path):
     report = json.loads((tmp_path / "s.json").read_text())
     assert report["le_path_difference"] < 1e-12  # the LE path predicts the same positions
     assert [row[0] for row in report["dem"]][:3] == ["pbc", "lebc", "pbc via the LE path"]
+
+
+def test_surrogate_rollout_quick(run_script, tmp_path):
+    out = run_script("benchmarks/surrogate_rollout", "--out-dir", str(tmp_path))
+    report = json.loads((tmp_path / "surrogate_rollout.json").read_text())
+    for scene in ("pbc", "lebc"):
+        data = report["scenes"][scene]
+        assert data["frames"] == 40 and data["dem_ms_per_frame"] > 0
+        assert set(data["rmse_over_d"]) == {"model", "constant_velocity", "linear_ar"}
+        assert len(data["blocks"]["blocks"]) == 2 and data["noise_floor"]["blocks"]
+        assert data["handback"] and (tmp_path / f"surrogate_rollout_{scene}.png").exists()
+        # the stable setting: contact correction, nothing closer than 0.98 d in a kept frame
+        assert data["settings"]["contact_correction"] is True
+        assert max(data["blocks"]["overlap_per_frame"]["model"]) == 0.0
+    assert "| target | measured (worst) | verdict |" in out
+
+
+def test_model_front_quick(run_script, tmp_path):
+    run_script("benchmarks/model_front", "--out-dir", str(tmp_path), "--links", "5", "1")
+    rows = json.loads((tmp_path / "model_front.json").read_text())
+    assert len(rows) == 2 and all(r["weights"] > 0 for r in rows)
+    assert all(set(r["timing"]) == {"1t/link5", "1t/link1"} for r in rows)
+    assert (tmp_path / "model_front.png").stat().st_size > 0

@@ -1,6 +1,8 @@
 """Training of a trajectory model: the loss of its decoder mode (relative to constant velocity's
 in the exact frame), the training step with its non-finite checks, and the optimiser with its
-learning-rate schedule.
+learning-rate schedule. The cosine schedule follows the training budget, in optimiser steps
+(``trainer.max_steps`` or epochs) or in wall time (``trainer.max_time``), whichever runs out
+first, so a budget in minutes decays the learning rate to zero when the time is up.
 
 :class:`TrainingSteps` is a mixin of :class:`gripdem.models.module.TrajectoryModule`: it reads
 the module's ``boundary``, ``exact``, ``change_std`` and its ``forward``.
@@ -12,6 +14,7 @@ import math
 import time
 
 import torch
+from lightning.pytorch.callbacks import Timer
 
 from gripdem.models import decoder_modes as modes
 from gripdem.models.history_noise import noisy_history
@@ -81,14 +84,26 @@ class TrainingSteps:
             opt = torch.optim.Adam(params, lr=self.hparams.lr)
         if self.hparams.lr_schedule == "constant":
             return opt
-        total = max(1, int(self.trainer.estimated_stepping_batches))
-        warmup = max(1, int(self.hparams.warmup_fraction * total))
+        total = self.trainer.estimated_stepping_batches
+        total = max(1, int(total)) if math.isfinite(total) else None
+        timer = next((c for c in self.trainer.callbacks if isinstance(c, Timer)), None)
+        warm = float(self.hparams.warmup_fraction)
+
+        def progress(step: int) -> float:
+            """Fraction of the budget used: optimiser steps or wall time (``trainer.max_time``),
+            whichever runs out first."""
+            done = 0.0 if total is None else (step + 1) / total
+            if timer is not None:
+                elapsed = timer.time_elapsed("train")
+                budget = elapsed + (timer.time_remaining("train") or 0.0)
+                done = max(done, elapsed / budget if budget > 0 else 1.0)
+            return min(1.0, done)
 
         def factor(step: int) -> float:
-            if step < warmup:
-                return (step + 1) / warmup
-            progress = min(1.0, (step - warmup) / max(1, total - warmup))
-            return 0.5 * (1.0 + math.cos(math.pi * progress))
+            p = progress(step)
+            if p < warm:
+                return max(p / warm, 1e-3)
+            return 0.5 * (1.0 + math.cos(math.pi * (p - warm) / max(1e-12, 1.0 - warm)))
 
         scheduler = torch.optim.lr_scheduler.LambdaLR(opt, factor)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}

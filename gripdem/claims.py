@@ -11,6 +11,7 @@ from pathlib import Path
 from gripdem.data.h5io import atomic_write_text
 from gripdem.evaluation.claims import evaluate, to_markdown
 from gripdem.evaluation.sweep_summary import runs_by_group
+from gripdem.runner.console import run_command
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -23,11 +24,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--vct", default="vct", help="model name standing for VCT")
     parser.add_argument("--out", default=None, help="folder for claims.md (default: first sweep)")
     args = parser.parse_args(argv)
-    try:
-        groups = runs_by_group(args.sweeps)
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(
+        "gripdem.claims", lambda: _claims(args), "claims.md not written", error_status=2
+    )
+
+
+def _claims(args) -> int:
+    groups = runs_by_group(args.sweeps)
     if not groups:
         print(f"error: no finished runs in {', '.join(args.sweeps)}", file=sys.stderr)
         return 2

@@ -23,6 +23,7 @@ from pathlib import Path
 from gripdem.data.dataset_io import write_dataset
 from gripdem.formats.fordatis import DEFAULT_DIAMETER, ImportReport, read_fordatis
 from gripdem.formats.lammps import read_lammps
+from gripdem.runner.console import run_command
 
 
 def _fmt(values) -> str:
@@ -241,11 +242,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return args.run(args)
-    except (ValueError, OSError) as exc:  # DatasetError is a ValueError; FileExistsError an OSError
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    return run_command(
+        f"gripdem.convert {args.format}",
+        lambda: args.run(args),
+        f"{args.output if args.format == 'fordatis' else args.files[-1]} not written (the "
+        "dataset is written under a temporary name and renamed when complete)",
+    )
 
 
 if __name__ == "__main__":

@@ -44,6 +44,7 @@ from gripdem.formats.handback import (
     trajectory_dump_text,
 )
 from gripdem.formats.lammps_dump import write_dump
+from gripdem.runner.console import run_command
 
 ATOM_STYLES = ("sphere", "atomic")
 
@@ -140,14 +141,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        lines = handback(args)
-    except (ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    for line in lines:
-        print(line)
-    return 0
+
+    def body() -> int:
+        for line in handback(args):
+            print(line)
+        return 0
+
+    return run_command(
+        "gripdem.handback",
+        body,
+        "files already written are complete, the one being written is not kept",
+    )
 
 
 if __name__ == "__main__":

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from gripdem.data.h5io import atomic_path
 from gripdem.evaluation.physics_report import physics_report, report_table
 from gripdem.evaluation.predictions import read_predictions
 from gripdem.plots.common import save_figure
 from gripdem.plots.physics import plot_physics
+from gripdem.runner.console import run_command
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -24,6 +26,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--figure", help="write the 2 x 2 physics figure here (PNG)")
     parser.add_argument("--json", help="write the scalars here")
     args = parser.parse_args(argv)
+    return run_command(
+        "gripdem.physics_report", lambda: _report(args), "files being written are not kept"
+    )
+
+
+def _report(args) -> int:
     p = read_predictions(args.predictions)
     report = physics_report(p)
     print(f"physics report: {p.title()}, {p.n_windows} windows x {p.horizon} steps")
@@ -40,4 +48,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(main())

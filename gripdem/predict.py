@@ -33,6 +33,7 @@ import torch
 
 from gripdem.inference.apply import apply_checkpoint
 from gripdem.inference.rollout import OVERLAP_MARGIN
+from gripdem.runner.console import run_command
 
 
 def _outputs(args) -> tuple[Path, Path, Path]:
@@ -86,7 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
         "dataset of a compatible scene, chaining its predictions for as many frames as asked.",
     )
     p.add_argument(
-        "checkpoint", type=Path, help="checkpoint (e.g. outputs/.../checkpoints/best.ckpt)"
+        "checkpoint",
+        type=Path,
+        help="a .ckpt checkpoint or a .safetensors model file (outputs/.../checkpoints/best.*)",
     )
     p.add_argument("data", type=Path, help="gripdem HDF5 dataset")
     p.add_argument("--start", type=int, default=0, metavar="FRAME", help="first observed frame")
@@ -106,6 +109,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="flag overlap when this fraction more particles overlap than at the start",
     )
     p.add_argument("--no-overlap", action="store_true", help="skip the per-frame overlap check")
+    p.add_argument(
+        "--no-correction",
+        action="store_true",
+        help="keep the model's frames as predicted (no contact correction after each frame)",
+    )
+    p.add_argument(
+        "--contact-distance",
+        type=float,
+        default=1.0,
+        metavar="D",
+        help="contact correction: closest centre distance allowed, in diameters (default 1)",
+    )
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--threads", type=int, metavar="T", help="torch CPU threads")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
@@ -113,17 +128,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    for name in ("frames", "step", "threads"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            parser.error(f"--{name} must be a positive integer, got {value}")
+    if args.start < 0:
+        parser.error(f"--start must be a frame index >= 0, got {args.start}")
+    if not args.overlap_margin >= 0:
+        parser.error(f"--overlap-margin must be >= 0, got {args.overlap_margin}")
     if args.threads:
         torch.set_num_threads(int(args.threads))
-    try:
+
+    def body() -> int:
         report = predict(args)
-    except (ValueError, OSError) as exc:  # DatasetError, IncompatibleError: ValueErrors
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    for line in report["_lines"]:
-        print(line)
-    return 0
+        for line in report["_lines"]:
+            print(line)
+        return 0
+
+    return run_command(
+        "gripdem.predict",
+        body,
+        "nothing half-written is left (predictions, trajectory and report are each written "
+        "under a temporary name and renamed when complete)",
+    )
 
 
 if __name__ == "__main__":

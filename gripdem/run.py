@@ -7,11 +7,16 @@ under the job's output directory and returns ``optimized_metric`` for sweepers (
     python -m gripdem.run                                   # default scene, fast preset
     python -m gripdem.run -m split=190-10,100-100 model=vct # a multirun sweep
     python -m gripdem.run experiment=smoke scene=lebc       # seconds, tiny scene
+
+A bad option or bad data ends the run with one line ``error: ...`` (exit status 1), Ctrl-C with
+one line saying what the output directory keeps (status 130); ``GRIPDEM_TRACEBACK=1`` adds the
+traceback (:func:`gripdem.runner.console.run_command`).
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import hydra
@@ -19,9 +24,12 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from gripdem.runner.config_schema import register
+from gripdem.runner.console import run_hydra_command, single_run_errors
 
 CONFIG_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 register()
+#: the output directory of the job running in this process (for the Ctrl-C line)
+_OUT_DIRS: list[Path] = []
 
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="config")
@@ -29,17 +37,35 @@ def main(cfg: DictConfig) -> float:
     from gripdem.runner.experiment import run_experiment
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    report = run_experiment(cfg, out_dir)
+    _OUT_DIRS.append(out_dir)
+    with single_run_errors():
+        report = run_experiment(cfg, out_dir)
     if not report:  # a non-zero DDP rank
         return math.nan
     metrics = {k: v for k, v in report.items() if isinstance(v, float)}
     if cfg.optimized_metric not in metrics:
-        raise KeyError(
+        raise ValueError(
             f"optimized_metric={cfg.optimized_metric!r} is not among the run's metrics; "
             f"choose one of {sorted(metrics)}"
         )
     return float(metrics[cfg.optimized_metric])
 
 
+def kept() -> str:
+    """What a run stopped by Ctrl-C leaves: complete files only, and which."""
+    if not _OUT_DIRS or not _OUT_DIRS[-1].exists():
+        return "nothing written (no output directory yet; a dataset being generated is not kept)"
+    out = _OUT_DIRS[-1]
+    files = sorted(
+        (str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and ".tmp-" not in p.name),
+        key=lambda name: (name.startswith("."), name),  # Hydra's .hydra/ last
+    )
+    shown = ", ".join(files[:6]) + (f" and {len(files) - 6} more" if len(files) > 6 else "")
+    resume = ""
+    if (out / "checkpoints" / "last.ckpt").exists():
+        resume = f"; resume with the same overrides plus hydra.run.dir={out} resume=true"
+    return f"kept in {out} (complete files only): {shown or 'nothing'}{resume}"
+
+
 if __name__ == "__main__":
-    main()
+    sys.exit(run_hydra_command("gripdem.run", main, kept))

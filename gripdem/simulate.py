@@ -6,12 +6,15 @@
 Writes a validated gripdem HDF5 (atomically) and its validation report
 (``<stem>.validation.json`` + ``<stem>.profile.png``) next to it. Without ``out`` the file goes
 to the dataset cache (:mod:`gripdem.data.cache`), where the experiment runner finds it.
+Bad options end in one line ``error: ...`` (status 1); Ctrl-C stops every worker process and
+writes nothing (status 130).
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import sys
 from pathlib import Path
 
 import hydra
@@ -20,12 +23,16 @@ from omegaconf import DictConfig
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.output import ensure_scene_dataset, generate_dataset
 from gripdem.dem.validation import report_paths
+from gripdem.runner.console import run_hydra_command, single_run_errors
 
 log = logging.getLogger(__name__)
+#: where this process is writing (for the Ctrl-C line)
+_TARGETS: list[str] = []
 
 
 def run(cfg: DictConfig) -> Path:
     """Generate (or find in the cache) the dataset described by ``cfg``; returns its path."""
+    _TARGETS.append("the dataset cache" if cfg.out is None else str(cfg.out))
     if cfg.out is None:
         path = ensure_scene_dataset(
             cfg.scene,
@@ -77,8 +84,17 @@ def summary(report: dict) -> str:
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="simulate")
 def main(cfg: DictConfig) -> None:
-    run(cfg)
+    with single_run_errors():
+        run(cfg)
+
+
+def nothing_written() -> str:
+    target = _TARGETS[-1] if _TARGETS else "the dataset"
+    return (
+        f"DEM generation for {target}: nothing written (a dataset and its report are written "
+        "only when complete) and no worker process left"
+    )
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_hydra_command("gripdem.simulate", main, nothing_written))

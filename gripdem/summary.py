@@ -8,6 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from gripdem.evaluation.sweep_summary import DEFAULT_METRICS, write_summary
+from gripdem.runner.console import run_command
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -25,14 +26,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="glob patterns of metric keys to show",
     )
     args = parser.parse_args(argv)
-    try:
+
+    def body() -> int:
         md, csv_path, markdown = write_summary(args.sweep_dir, args.out_dir, args.metrics)
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(markdown, end="")
-    print(f"\nwritten: {md}\n         {csv_path}")
-    return 0
+        print(markdown, end="")
+        print(f"\nwritten: {md}\n         {csv_path}")
+        return 0
+
+    return run_command("gripdem.summary", body, "the summary files are not written", 2)
 
 
 if __name__ == "__main__":

@@ -47,9 +47,8 @@ from gripdem.data.batch import collate_windows
 from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
 from gripdem.data.units import rescale
 from gripdem.evaluation.metrics import position_residuals, rmse
-from gripdem.inference.checkpoint import load_model
+from gripdem.inference.checkpoint import load_checkpoint_model, load_model
 from gripdem.inference.rollout import rollout
-from gripdem.models.module import TrajectoryModule
 
 BF16_CORRECTION_TOLERANCE = 0.02
 BF16_RMSE_TOLERANCE = 0.01
@@ -113,7 +112,7 @@ def long_rollout(checkpoint: Path, data_path: Path, frames: int, label: str) -> 
 def bf16_case(run_dir: Path, n_windows: int | None, device: str = "cpu") -> dict:
     """Test windows of a trained run under autocast against float32."""
     run = load_run(run_dir)
-    model = TrajectoryModule.load_from_checkpoint(str(run.checkpoint), map_location=device)
+    model = load_checkpoint_model(run.checkpoint).to(device)
     model.eval()
     dm = test_windows(run, model)
     dataset = dm.datasets["test"]

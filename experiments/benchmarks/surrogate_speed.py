@@ -54,7 +54,7 @@ from gripdem.data.dataset_io import read_meta, write_dataset
 from gripdem.data.schema import TrajectoryData
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
-from gripdem.inference.checkpoint import data_scene
+from gripdem.inference.checkpoint import data_scene, load_checkpoint_model
 from gripdem.inference.rollout import rollout
 from gripdem.models.module import TrajectoryModule
 
@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> dict:
         n0 = meta0.n_particles
         sizes = args.sizes or ([n0, 4 * n0] if args.quick else [2000, 8000, 32000])
         if scene in checkpoints:
-            model = TrajectoryModule.load_from_checkpoint(checkpoints[scene], map_location="cpu")
+            model = load_checkpoint_model(checkpoints[scene])
             label = f"checkpoint {checkpoints[scene]}"
         else:
             model = default_model(scene, data_path)

@@ -57,8 +57,8 @@ from time_vs_error_timing import (
     time_model,
 )
 
+from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.models.autoregressive import fit_on_training_frames
-from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 BASELINE_NAMES = ("stay", "constant_velocity", "mean_flow", "linear_ar")
 
@@ -116,7 +116,7 @@ def train_smoke_runs(out: Path, scenes: list[str]) -> list[Path]:
 # one scene/split
 # --------------------------------------------------------------------------------------------
 def evaluate_run(run: Run, n_windows: int | None, with_baselines: bool) -> tuple[list, dict]:
-    model = TrajectoryModule.load_from_checkpoint(str(run.checkpoint), map_location="cpu").eval()
+    model = load_checkpoint_model(run.checkpoint)
     dm = test_windows(run, model)
     dataset = dm.datasets["test"]
     n = len(dataset) if n_windows is None else min(n_windows, len(dataset))

@@ -196,6 +196,12 @@ def _plan(
     eval_stride = f if eval_stride is None else int(eval_stride)
     span = k + 1 + f
     frac = _fractions(fractions)
+    if split.history + 1 + f > n_frames:  # the split's name promises h input velocities
+        raise SplitError(
+            f"split {split.name} needs {split.history + 1 + f} frames for one window at its full "
+            f"history (h+1+f; history_len={k} only shortens what the model reads, the split's "
+            f"h is still its label) but a simulation has {n_frames}."
+        )
     if span > n_frames:
         raise SplitError(
             f"split {split.name} with history_len {k} needs windows of {span} "

@@ -144,12 +144,51 @@ def check_array(path, name: str, array: np.ndarray, shape: tuple, what: str) -> 
         raise DatasetError(path, name, f"expected a floating-point array, got dtype {array.dtype}")
 
 
-def check_finite(path, name: str, array: np.ndarray) -> None:
+#: names of the axes of the arrays of a file, for error messages (first offending entry)
+AXIS_NAMES = {
+    "positions": ("simulation", "frame", "particle", "axis"),
+    "velocities": ("simulation", "frame", "particle", "axis"),
+    "times": ("simulation", "frame"),
+    "radii": ("particle",),
+}
+#: below this volume fraction the particle size and the box are taken to be in different units
+MIN_VOLUME_FRACTION = 1e-6
+
+
+def locate(name: str, index: tuple[int, ...]) -> str:
+    """``simulation 2, frame 50, particle 7, axis x`` for an index into field ``name``."""
+    names = AXIS_NAMES.get(name, ())
+    if len(names) != len(index):
+        return f"index {tuple(index)}"
+    return ", ".join(
+        f"{label} {'xyz'[i] if label == 'axis' and i < 3 else i}"
+        for label, i in zip(names, index, strict=True)
+    )
+
+
+def check_finite(path, name: str, array: np.ndarray, origin: tuple[int, ...] = ()) -> None:
+    """Raise naming the first non-finite entry. ``origin``: when ``array`` is a block of the
+    field, the field index of the block's first entry, up to the block's first axis (e.g.
+    ``(sim, first_frame)`` for frames of one simulation)."""
     bad = ~np.isfinite(array)
     if bad.any():
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        first = np.argwhere(bad)[0]
+        value = array[tuple(first)]
+        full = tuple(int(i) for i in first)
+        if origin:  # the block's first axis is the field's axis len(origin) - 1
+            full = (*origin[:-1], origin[-1] + full[0], *full[1:])
+        hint = ""
+        if name in ("positions", "velocities") and array.ndim >= 2 and bad[tuple(first[:-1])].all():
+            hint = (
+                "; the whole particle is missing in that frame: particle counts must be constant "
+                "(every frame holds every particle)"
+            )
         raise DatasetError(
-            path, name, f"expected finite values, found {int(bad.sum())} NaN/Inf (first at {first})"
+            path,
+            name,
+            f"expected finite values, found NaN/Inf: {float(value)!r} at {locate(name, full)}"
+            + (f" ({int(bad.sum())} non-finite in all)" if not origin else "")
+            + hint,
         )
 
 
@@ -183,22 +222,38 @@ def validate_times(path, times: np.ndarray) -> float:
 
 
 def validate_positions(
-    path, positions: np.ndarray, box: Box, sim_index: int | None = None, field: str = "positions"
+    path,
+    positions: np.ndarray,
+    box: Box,
+    sim_index: int | None = None,
+    field: str = "positions",
+    first_frame: int = 0,
 ) -> None:
-    """Finite and inside ``[-l/2, l/2)`` within ``POSITION_RTOL`` per axis."""
-    check_finite(path, field, positions)
+    """Finite and inside ``[-l/2, l/2)`` within ``POSITION_RTOL`` per axis. ``positions``:
+    ``(frames, particles, 3)`` of simulation ``sim_index`` from frame ``first_frame`` on, or
+    any ``(..., 3)`` array (``sim_index=None``)."""
+    origin = () if sim_index is None else (sim_index, first_frame)
+    check_finite(path, field, positions, origin)
     for axis, length in enumerate(box.lengths):
         coords = positions[..., axis]
         tol = POSITION_RTOL * length
         lo, hi = float(coords.min()), float(coords.max())
         if lo < -0.5 * length - tol or hi > 0.5 * length + tol:
-            where = "" if sim_index is None else f" (simulation {sim_index})"
+            outside = (coords < -0.5 * length - tol) | (coords > 0.5 * length + tol)
+            first = tuple(int(i) for i in np.argwhere(outside)[0])
+            if sim_index is None:
+                where = f"first at index {first}"
+            else:
+                full = (sim_index, first_frame + first[0], *first[1:], axis)
+                where = f"first at {locate(field, full)}: {float(coords[first])!r}"
             raise DatasetError(
                 path,
                 field,
                 f"expected wrapped coordinates in [-l/2, l/2) = "
-                f"[{-0.5 * length:g}, {0.5 * length:g}) on axis {'xyz'[axis]}{where}, found "
-                f"values in [{lo:g}, {hi:g}]; wrap them with gripdem.boundary.wrap_positions",
+                f"[{-0.5 * length:g}, {0.5 * length:g}) on axis {'xyz'[axis]}, found "
+                f"values in [{lo:g}, {hi:g}] ({where}); wrap them with "
+                "gripdem.boundary.wrap_positions, or check that the box and the positions are "
+                "in the same units",
             )
 
 
@@ -220,6 +275,7 @@ def validate(data: TrajectoryData, path=None) -> float:
     interval = validate_times(path, times)
     check_radii(path, data.radius, data.radii, n)
     check_packing(path, data.boundary.box, n, data.radius, data.radii)
+    check_units(path, data.boundary.box, n, data.radius, data.radii)
     for sim in range(s):
         validate_positions(path, pos[sim], data.boundary.box, sim)
     if not np.isfinite(data.body_force_amplitude):
@@ -241,11 +297,13 @@ def check_radii(path, radius: float, radii: np.ndarray | None, n: int) -> None:
 
 
 def check_packing(path, box: Box, n: int, radius: float, radii) -> None:
-    volume = (
-        (4.0 / 3.0)
-        * np.pi
-        * (np.sum(np.asarray(radii) ** 3) if radii is not None else n * radius**3)
-    )
+    with np.errstate(over="ignore"):  # absurd sizes give inf, refused below
+        cubes = (
+            np.sum(np.asarray(radii, dtype=np.float64) ** 3)
+            if radii is not None
+            else n * np.float64(radius) ** 3
+        )
+        volume = (4.0 / 3.0) * np.pi * cubes
     phi = volume / box.volume
     if phi > RANDOM_CLOSE_PACKING:
         raise DatasetError(
@@ -254,6 +312,35 @@ def check_packing(path, box: Box, n: int, radius: float, radii) -> None:
             f"expected a volume fraction below random close packing ({RANDOM_CLOSE_PACKING}); "
             f"{n} particles of radius {radius:g} in a box of {box.lx:g} x {box.ly:g} x "
             f"{box.lz:g} give {phi:.3g} (is a diameter stored as the radius?)",
+        )
+
+
+def check_units(path, box: Box, n: int, radius: float, radii=None) -> None:
+    """Particle size and box plausible in the same units: a particle smaller than half the
+    shortest box length (the minimum-image convention needs it) and a volume fraction above
+    :data:`MIN_VOLUME_FRACTION` (far below: a size in metres beside a box in micrometres)."""
+    name = "radius" if radii is None or radius >= np.max(radii) else "radii"
+    diameter = 2.0 * max(float(radius), float(np.max(radii)) if radii is not None else 0.0)
+    shortest = float(np.min(box.lengths))
+    if diameter >= 0.5 * shortest:
+        raise DatasetError(
+            path,
+            name,
+            f"expected a particle diameter below half the shortest box length "
+            f"({0.5 * shortest:g}), got {diameter:g}: are the size and the box in the same units?",
+        )
+    phi = (
+        box.volume_fraction(n, diameter)
+        if radii is None
+        else ((4.0 / 3.0) * np.pi * float(np.sum(np.asarray(radii) ** 3)) / box.volume)
+    )
+    if phi < MIN_VOLUME_FRACTION:
+        raise DatasetError(
+            path,
+            name,
+            f"expected a volume fraction of at least {MIN_VOLUME_FRACTION:g}; {n} particles of "
+            f"diameter {diameter:g} in a box of {box.lx:g} x {box.ly:g} x {box.lz:g} give "
+            f"{phi:.3g}: are the size and the box in the same units?",
         )
 
 

@@ -13,8 +13,12 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import signal
+import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from queue import Empty
 
@@ -202,12 +206,17 @@ def generate(
 
 
 def _generate_parallel(config, seeds, n_workers, bar, device) -> list[SimulationResult]:
-    # spawn: a clean interpreter per worker (no forked torch/numba thread state)
+    # spawn: a clean interpreter per worker (no forked torch/numba thread state). The workers
+    # ignore Ctrl-C (started while it is ignored, they inherit that): this process alone
+    # handles it and stops them, so no worker prints a traceback of its own.
     ctx = multiprocessing.get_context("spawn")
-    with ctx.Manager() as manager:
+    with _children_ignore_sigint():
+        manager = ctx.Manager()
+    with manager:
         queue = manager.Queue()
         with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
-            futures = [pool.submit(_worker, config, s, queue, device) for s in seeds]
+            with _children_ignore_sigint():
+                futures = [pool.submit(_worker, config, s, queue, device) for s in seeds]
             try:
                 while not all(f.done() for f in futures):
                     _drain(queue, bar, timeout=0.5)
@@ -216,7 +225,32 @@ def _generate_parallel(config, seeds, n_workers, bar, device) -> list[Simulation
             except BaseException:
                 for f in futures:
                     f.cancel()
+                _stop_workers(pool)
                 raise
+
+
+@contextmanager
+def _children_ignore_sigint() -> Iterator[None]:
+    """Processes started inside the block inherit an ignored SIGINT (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Terminate the pool's worker processes (they ignore Ctrl-C and would run on)."""
+    terminate = getattr(pool, "terminate_workers", None)  # Python >= 3.14
+    if terminate is not None:
+        terminate()
+        return
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        if process.is_alive():
+            process.terminate()
 
 
 def _drain(queue, bar, timeout: float) -> None:

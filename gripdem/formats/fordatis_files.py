@@ -18,6 +18,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from gripdem.data.dataset_io import check_stored
 from gripdem.data.schema import TIME_RTOL, DatasetError
 
 #: macOS metadata that archives made on a Mac carry beside the real files
@@ -30,6 +31,7 @@ _STEP = re.compile(r"^Step#(\d+)$")
 
 
 _DATASETS = ("Identifier", "Coords_0", "Coords_1", "Coords_2")
+_H5_ERRORS = (OSError, RuntimeError, KeyError, TypeError, ValueError)
 
 
 class FordatisError(DatasetError):
@@ -93,7 +95,15 @@ def _dataset(label: str, group: h5py.Group, key: str, name: str) -> np.ndarray:
         raise FordatisError(
             label, field_name, "missing dataset" if obj is None else "expected a dataset"
         )
-    value = np.asarray(obj[()])
+    check_stored(label, field_name, obj)  # a declared size the file does not hold: refused
+    if obj.ndim not in (1, 2) or (obj.ndim == 2 and obj.shape[1] != 1):
+        raise FordatisError(
+            label, field_name, f"expected a 1-D array (particles,), got shape {obj.shape}"
+        )
+    try:
+        value = np.asarray(obj[()])
+    except (OSError, RuntimeError, TypeError, ValueError) as exc:
+        raise FordatisError(label, field_name, f"unreadable ({exc})") from None
     if value.ndim == 2 and value.shape[1] == 1:
         value = value[:, 0]
     if value.ndim != 1:
@@ -151,59 +161,74 @@ def read_simulation(path: Path, label: str, drop_frames: int = 0) -> RawSimulati
     except OSError as exc:
         raise FordatisError(label, "<file>", f"expected a readable HDF5 file ({exc})") from None
     with h5:
-        steps = _steps(label, h5)
-        if len(steps) - drop_frames < 2:
+        try:
+            return _read_simulation(h5, label, drop_frames)
+        except DatasetError:
+            raise
+        except _H5_ERRORS as exc:  # h5py's errors for a corrupted file's structure
+            raise FordatisError(
+                label, "<file>", f"corrupted HDF5 content ({type(exc).__name__}: {exc})"
+            ) from None
+
+
+def _read_simulation(h5: h5py.File, label: str, drop_frames: int) -> RawSimulation:
+    steps = _steps(label, h5)
+    if len(steps) - drop_frames < 2:
+        raise FordatisError(
+            label,
+            "Step#k",
+            f"{len(steps)} frames; dropping {drop_frames} leaves fewer than "
+            "the 2 frames a trajectory needs (lower --drop-frames)",
+        )
+    kept = steps[drop_frames:]
+    key0 = steps[0][1]
+    if not isinstance(h5[key0], h5py.Group):
+        raise FordatisError(label, key0, "expected a group holding one frame")
+    first_time = _attr_vector(label, h5[key0], key0, "Time", 1)[0]
+    times = np.empty(len(kept))
+    positions: np.ndarray | None = None
+    for frame, (_, key) in enumerate(kept):
+        group = h5[key]
+        if not isinstance(group, h5py.Group):
+            raise FordatisError(label, key, "expected a group holding one frame")
+        times[frame] = _attr_vector(label, group, key, "Time", 1)[0]
+        lower = _attr_vector(label, group, key, "Lower", 3)
+        upper = _attr_vector(label, group, key, "Upper", 3)
+        raw = [_dataset(label, group, key, name) for name in _DATASETS]
+        n = raw[0].shape[0]
+        for name, array in zip(_DATASETS[1:], raw[1:], strict=True):
+            if array.shape[0] != n:
+                raise FordatisError(
+                    label,
+                    f"{key}/{name}",
+                    f"expected {n} values like {key}/Identifier, got {array.shape[0]}",
+                )
+        ids = _identifiers(label, key, raw[0])
+        order = np.argsort(ids, kind="stable")
+        coords = np.stack([np.asarray(a, dtype=np.float64)[order] for a in raw[1:]], axis=-1)
+        if not np.isfinite(coords).all():
+            p, bad = (int(i) for i in np.argwhere(~np.isfinite(coords))[0])
             raise FordatisError(
                 label,
-                "Step#k",
-                f"{len(steps)} frames; dropping {drop_frames} leaves fewer than "
-                "the 2 frames a trajectory needs (lower --drop-frames)",
+                f"{key}/Coords_{bad}",
+                f"expected finite coordinates, found {float(coords[p, bad])!r} (Identifier "
+                f"{int(ids[order][p])})",
             )
-        kept = steps[drop_frames:]
-        key0 = steps[0][1]
-        if not isinstance(h5[key0], h5py.Group):
-            raise FordatisError(label, key0, "expected a group holding one frame")
-        first_time = _attr_vector(label, h5[key0], key0, "Time", 1)[0]
-        times = np.empty(len(kept))
-        positions: np.ndarray | None = None
-        for frame, (_, key) in enumerate(kept):
-            group = h5[key]
-            if not isinstance(group, h5py.Group):
-                raise FordatisError(label, key, "expected a group holding one frame")
-            times[frame] = _attr_vector(label, group, key, "Time", 1)[0]
-            lower = _attr_vector(label, group, key, "Lower", 3)
-            upper = _attr_vector(label, group, key, "Upper", 3)
-            raw = [_dataset(label, group, key, name) for name in _DATASETS]
-            n = raw[0].shape[0]
-            for name, array in zip(_DATASETS[1:], raw[1:], strict=True):
-                if array.shape[0] != n:
-                    raise FordatisError(
-                        label,
-                        f"{key}/{name}",
-                        f"expected {n} values like {key}/Identifier, got {array.shape[0]}",
-                    )
-            ids = _identifiers(label, key, raw[0])
-            order = np.argsort(ids, kind="stable")
-            coords = np.stack([np.asarray(a, dtype=np.float64)[order] for a in raw[1:]], axis=-1)
-            if not np.isfinite(coords).all():
-                bad = int(np.argwhere(~np.isfinite(coords))[0][1])
+        if positions is None:
+            if not ((upper > lower).all() and np.isfinite(upper - lower).all()):
                 raise FordatisError(
-                    label, f"{key}/Coords_{bad}", "expected finite coordinates, found NaN/Inf"
+                    label,
+                    f"{key} attr Upper",
+                    f"expected finite Upper > Lower on every axis, got "
+                    f"Lower={lower.tolist()}, Upper={upper.tolist()}",
                 )
-            if positions is None:
-                if not (upper > lower).all():
-                    raise FordatisError(
-                        label,
-                        f"{key} attr Upper",
-                        f"expected Upper > Lower on every axis, got "
-                        f"Lower={lower.tolist()}, Upper={upper.tolist()}",
-                    )
-                first_key, first_lower, first_upper, sorted_ids = key, lower, upper, ids[order]
-                positions = np.empty((len(kept), n, 3))
-            else:
-                _check_same_box(label, key, first_key, lower, upper, first_lower, first_upper)
-                _check_same_ids(label, key, first_key, ids[order], sorted_ids)
-            positions[frame] = coords
+            first_key, first_lower, first_upper, sorted_ids = key, lower, upper, ids[order]
+            positions = np.empty((len(kept), n, 3))
+        else:
+            _check_same_box(label, key, first_key, lower, upper, first_lower, first_upper)
+            _check_same_ids(label, key, first_key, ids[order], sorted_ids)
+        _check_inside(label, key, coords, first_lower, first_upper, sorted_ids)
+        positions[frame] = coords
     _check_times(label, times, [key for _, key in kept])
     centre = 0.5 * (first_lower + first_upper)
     positions -= centre
@@ -219,6 +244,23 @@ def read_simulation(path: Path, label: str, drop_frames: int = 0) -> RawSimulati
         lower=first_lower,
         upper=first_upper,
     )
+
+
+def _check_inside(label, key, coords, lower, upper, ids) -> None:
+    """Coordinates within one box length of the box (a DEM code stores them wrapped, or
+    just outside): anything farther is another unit or a corrupted file."""
+    length = upper - lower
+    with np.errstate(over="ignore"):  # a huge box: its bounds go to +-inf, still compared
+        outside = (coords < lower - length) | (coords > upper + length)
+    if outside.any():
+        p, axis = (int(i) for i in np.argwhere(outside)[0])
+        raise FordatisError(
+            label,
+            f"{key}/Coords_{axis}",
+            f"expected coordinates inside the box [{lower[axis]:g}, {upper[axis]:g}] (Lower, "
+            f"Upper; within one box length), found {coords[p, axis]:g} for Identifier "
+            f"{int(ids[p])}: coordinates in another unit than the box, or a corrupted file?",
+        )
 
 
 def _check_same_box(label, key, first_key, lower, upper, first_lower, first_upper) -> None:
@@ -283,7 +325,11 @@ def archive_members(source: Path, workdir: Path, skipped: list[str]) -> Iterator
     if h5py.is_hdf5(source):
         yield str(source), source
         return
-    if not tarfile.is_tarfile(source):
+    try:
+        is_tar = tarfile.is_tarfile(source)
+    except (tarfile.TarError, EOFError, zlib.error, OSError, UnicodeDecodeError) as exc:
+        raise FordatisError(source, "<archive>", f"unreadable archive ({exc})") from None
+    if not is_tar:
         raise FordatisError(
             source, "<file>", "expected one HDF5 file or a tar archive (.tar.gz) of HDF5 files"
         )
@@ -308,5 +354,5 @@ def archive_members(source: Path, workdir: Path, skipped: list[str]) -> Iterator
                     raise FordatisError(label, "<file>", "expected an HDF5 file; this is not one")
                 yield label, target
                 target.unlink()
-    except (tarfile.TarError, EOFError, zlib.error, OSError) as exc:
+    except (tarfile.TarError, EOFError, zlib.error, OSError, UnicodeDecodeError) as exc:
         raise FordatisError(label, "<archive>", f"unreadable archive or member ({exc})") from None

@@ -1,4 +1,5 @@
-"""LAMMPS / LIGGGHTS text dumps: read snapshots as written, and write them.
+"""LAMMPS / LIGGGHTS text dumps: read snapshots as written (writing them:
+:mod:`gripdem.formats.lammps_write`).
 
 A dump is a sequence of snapshots, each a set of ``ITEM:`` blocks::
 
@@ -28,14 +29,17 @@ from __future__ import annotations
 import gzip
 import io
 import os
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from gripdem.data.h5io import atomic_path, atomic_write_text
 from gripdem.data.schema import DatasetError
+
+# the writers live in lammps_write; importable from here as before
+from gripdem.formats.lammps_write import FLOAT, bounds_of, dump_text, write_dump  # noqa: F401
 
 #: coordinate column sets, in the order of preference when a dump holds several
 COORDINATE_KINDS = {
@@ -54,7 +58,6 @@ KNOWN_COLUMNS = (
     + VELOCITIES
 )
 _INTEGER_COLUMNS = ("id", "type") + IMAGE_FLAGS
-FLOAT = "%.17g"  # repr precision: a dump written here reads back to the same float64
 
 
 class DumpError(DatasetError):
@@ -163,10 +166,22 @@ class _Lines:
         if self.pending is not None:
             line, self.pending = self.pending, None
             return line
-        line = self.handle.readline()
+        try:
+            line = self.handle.readline()
+        except (EOFError, zlib.error, OSError) as exc:  # a truncated or corrupted gzip stream
+            raise DumpError(
+                self.label, "<file>", f"unreadable after line {self.number} ({exc})"
+            ) from None
         if not line:
             return None
         self.number += 1
+        if not line.endswith("\n") and line.strip() and self.number > 1:  # LAMMPS ends each
+            raise DumpError(
+                self.label,
+                "<file>",
+                f"ends in the middle of line {self.number} ({line[-40:]!r}, no newline): "
+                "truncated? (if the file is complete, end it with a newline)",
+            )
         return line.rstrip("\r\n")
 
     def push(self, line: str) -> None:
@@ -183,11 +198,16 @@ class _Lines:
 
 def _int(text: str, label: str, item: str, where: str) -> int:
     try:
-        return int(text.split()[0])
+        value = int(text.split()[0])
     except (ValueError, IndexError):
+        value = None
+    if value is None or not 0 <= value < 2**63:
         raise DumpError(
-            label, f"ITEM: {item}", f"{where}: expected an integer, got {text!r}"
-        ) from None
+            label,
+            f"ITEM: {item}",
+            f"{where}: expected a whole number in 0..2^63-1, got {text[:40]!r}",
+        )
+    return value
 
 
 def _box(lines: _Lines, header: str, where: str) -> tuple[np.ndarray, np.ndarray, bool, tuple]:
@@ -217,6 +237,12 @@ def _box(lines: _Lines, header: str, where: str) -> tuple[np.ndarray, np.ndarray
             )
         rows.append(values)
     rows = np.asarray(rows, dtype=np.float64)
+    if not (np.isfinite(rows).all() and (rows[:, 1] > rows[:, 0]).all()):
+        raise DumpError(
+            lines.label,
+            "ITEM: BOX BOUNDS",
+            f"{where}: expected finite bounds with lo < hi on every axis, got {rows.tolist()}",
+        )
     tilt = rows[:, 2].copy() if triclinic else np.zeros(3)
     return rows[:, :2].copy(), tilt, triclinic, flags
 
@@ -255,8 +281,15 @@ def _atoms(lines: _Lines, header: str, n: int, where: str) -> tuple[tuple, dict]
             raise DumpError(
                 lines.label, f"ITEM: ATOMS column {name}", f"{where}: expected numbers"
             ) from None
+        if not np.isfinite(values).all():
+            k = int(np.argwhere(~np.isfinite(values))[0][0])
+            raise DumpError(
+                lines.label,
+                f"ITEM: ATOMS column {name}",
+                f"{where}: expected finite numbers, found {table[k, j]!r} on atom line {k + 1}",
+            )
         if name in _INTEGER_COLUMNS:
-            if not np.all(values == np.round(values)):
+            if not np.all((values == np.round(values)) & (np.abs(values) < 2**62)):
                 raise DumpError(
                     lines.label, f"ITEM: ATOMS column {name}", f"{where}: expected integers"
                 )
@@ -326,68 +359,3 @@ def read_dump(path: str | os.PathLike) -> Iterator[DumpFrame]:
                 label, index, timestep, bounds, tilt, triclinic, flags, columns, data, items
             )
             index += 1
-
-
-# --------------------------------------------------------------------------------------------
-# writing
-# --------------------------------------------------------------------------------------------
-def bounds_of(lo: np.ndarray, lengths: np.ndarray, tilt: np.ndarray | None) -> np.ndarray:
-    """``(3, 2)`` the ``BOX BOUNDS`` lines (bounding box of a tilted cell) of origin ``lo``,
-    extents ``lengths`` and tilt ``xy, xz, yz`` (None: orthogonal)."""
-    lo = np.asarray(lo, np.float64)
-    hi = lo + np.asarray(lengths, np.float64)
-    if tilt is None:
-        return np.stack([lo, hi], axis=-1)
-    xy, xz, yz = (float(v) for v in tilt)
-    low = lo + np.array([min(0.0, xy, xz, xy + xz), min(0.0, yz), 0.0])
-    high = hi + np.array([max(0.0, xy, xz, xy + xz), max(0.0, yz), 0.0])
-    return np.stack([low, high], axis=-1)
-
-
-def dump_text(
-    timesteps: np.ndarray,
-    lo: np.ndarray,
-    lengths: np.ndarray,
-    positions: np.ndarray,
-    tilt: np.ndarray | None = None,
-    columns: dict[str, np.ndarray] | None = None,
-    ids: np.ndarray | None = None,
-    float_format: str = FLOAT,
-) -> str:
-    """Dump text of ``positions`` ``(frames, atoms, 3)`` (LAMMPS axes, columns ``x y z``).
-
-    ``tilt``: ``(frames, 3)`` ``xy xz yz`` per frame (None: orthogonal box); ``columns``: extra
-    per-atom columns ``name -> (frames, atoms)`` or ``(atoms,)``, written after ``x y z``;
-    ids default to ``1..N``, type 1."""
-    positions = np.asarray(positions, np.float64)
-    frames, n, _ = positions.shape
-    ids = np.arange(1, n + 1) if ids is None else np.asarray(ids)
-    extra = {
-        k: np.broadcast_to(np.asarray(v, np.float64), (frames, n))
-        for k, v in (columns or {}).items()
-    }
-    header = "ITEM: ATOMS id type x y z" + "".join(f" {k}" for k in extra) + "\n"
-    fmt = "%d %d " + " ".join([float_format] * (3 + len(extra)))
-    buf = io.StringIO()
-    for j in range(frames):
-        t = None if tilt is None else np.asarray(tilt, np.float64)[j]
-        buf.write(f"ITEM: TIMESTEP\n{int(timesteps[j])}\nITEM: NUMBER OF ATOMS\n{n}\n")
-        buf.write("ITEM: BOX BOUNDS " + ("pp pp pp" if t is None else "xy xz yz pp pp pp") + "\n")
-        for axis, (low, high) in enumerate(bounds_of(lo, lengths, t)):
-            tail = "" if t is None else f" {float(t[axis])!r}"
-            buf.write(f"{float(low)!r} {float(high)!r}{tail}\n")
-        buf.write(header)
-        table = np.column_stack([ids, np.ones(n), positions[j], *(v[j] for v in extra.values())])
-        np.savetxt(buf, table, fmt=fmt)
-    return buf.getvalue()
-
-
-def write_dump(path: str | os.PathLike, text: str, overwrite: bool = False) -> Path:
-    """Write dump text atomically (gzip-compressed when ``path`` ends in ``.gz``)."""
-    path = Path(path)
-    if path.suffix != ".gz":
-        return atomic_write_text(path, text, overwrite)
-    with atomic_path(path, overwrite) as tmp:
-        with gzip.open(tmp, "wt", encoding="utf-8") as handle:
-            handle.write(text)
-    return path

@@ -21,6 +21,9 @@ from gripdem.formats.lammps_dump import COORDINATE_KINDS, VELOCITIES, DumpError,
 
 #: box lengths and origins must agree between snapshots to this fraction of the box
 BOX_RTOL = 1e-6
+#: coordinates (unwrapped ones included) farther than this many box lengths from the box are
+#: refused: another unit or a corrupted dump (and beyond float64's range for wrapping)
+FAR = 1e6
 #: a tilt factor below this fraction of the flow length counts as zero
 TILT_ZERO = 1e-12
 _TILTS = ("xy", "xz", "yz")
@@ -197,6 +200,15 @@ def _sorted_frame(frame, first):
                 f"({list(first['columns'])})",
             )
     positions = frame.positions(kind)[order]
+    far = np.abs(positions - (frame.lo + 0.5 * frame.lengths)) > FAR * frame.lengths.max()
+    if far.any():
+        atom, axis = (int(i) for i in np.argwhere(far)[0])
+        raise DumpError(
+            frame.source,
+            f"ITEM: ATOMS column {COORDINATE_KINDS[kind][axis]}",
+            f"{frame.where}: expected coordinates within {FAR:g} box lengths of the box, found "
+            f"{positions[atom, axis]:g} for id {int(ids[atom])}",
+        )
     flags = frame.image_flags()
     known = not kind.endswith("unwrapped") or flags is not None
     if kind.endswith("unwrapped") and flags is not None:

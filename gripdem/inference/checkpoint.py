@@ -16,20 +16,55 @@ is a scene the model can be applied to, and refuses the rest with an
 
 The LE time origin and sign convention of the data are the data's own: :func:`load_model`
 builds the model with the data's scene, so decoding wraps each frame with the data's offsets.
+
+Loading is safe for files from anyone (:func:`read_checkpoint`): a Lightning ``.ckpt`` is
+unpickled with ``torch.load(weights_only=True)`` only (tensors and plain containers; a file
+that needs any other class or function is refused before anything in it runs), after a check
+that its zip records are stored as ``torch.save`` writes them (uncompressed, so no record can
+expand beyond the file); a ``.safetensors`` model file (:mod:`gripdem.inference.model_file`)
+holds no pickle at all. Either way the model is built as ``TrajectoryModule(**hparams)`` and
+the weights loaded with ``strict=True``. Refusals are :class:`CheckpointError` naming the file.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import pickle
+import re
+import warnings
+import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
+import gripdem
 from gripdem.data.encodings import ENCODINGS
 from gripdem.data.schema import DatasetMeta
+from gripdem.inference.model_file import (
+    CheckpointError,
+    build_module,
+    check_hparams,
+    finite_metrics,
+    is_safetensors,
+    read_model_file,
+    save_model_file,
+)
+
+__all__ = [
+    "CheckpointError",
+    "IncompatibleError",
+    "check_compatible",
+    "export_run_model",
+    "load_checkpoint_model",
+    "load_model",
+    "read_checkpoint",
+    "read_hparams",
+    "training_overlap",
+]
 
 #: diameter, frame interval and shear rate must agree within this relative tolerance
 SCENE_RTOL = 1e-3
@@ -44,23 +79,107 @@ class IncompatibleError(ValueError):
         super().__init__(f"{data}: field '{field}': {message} (checkpoint {checkpoint})")
 
 
-def read_hparams(checkpoint: str | os.PathLike) -> dict[str, Any]:
-    """The hyperparameters of a gripdem checkpoint (a clear error for anything else)."""
+def _check_zip(path: Path) -> None:
+    """A torch zip checkpoint whose records are stored uncompressed (as ``torch.save`` writes
+    them) and lie within the file: no record can expand in memory beyond the file's size."""
+    size = path.stat().st_size
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = archive.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise CheckpointError(
+            path, "<file>", f"not a readable PyTorch checkpoint (a broken zip: {exc})"
+        ) from None
+    for info in members:
+        if info.compress_type != zipfile.ZIP_STORED or info.file_size > size:
+            raise CheckpointError(
+                path,
+                info.filename,
+                f"a compressed or oversized record ({info.file_size} bytes in a {size}-byte "
+                "file); torch.save stores records uncompressed: a crafted file?",
+            )
+
+
+def _read_lightning(path: Path) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+    _check_zip(path)
+    try:
+        with warnings.catch_warnings():  # torch's remarks on a foreign file: the error says it
+            warnings.simplefilter("ignore", UserWarning)
+            content = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        found = re.search(r"(unsupported|Unsupported) (global: )?GLOBAL ([\w.]+)", str(exc))
+        reason = f"it asks for {found.group(3)}" if found else "it is not plain data"
+        raise CheckpointError(
+            path,
+            "<pickle>",
+            "refused by the safe loader (weights_only): the file needs classes or functions "
+            f"that a gripdem checkpoint never holds, and nothing in it was run ({reason})",
+        ) from None
+    except Exception as exc:  # torch raises many kinds for a file that is not a checkpoint
+        raise CheckpointError(
+            path, "<file>", f"not a readable PyTorch checkpoint ({type(exc).__name__}: {exc})"
+        ) from None
+    if not isinstance(content, Mapping):
+        raise CheckpointError(path, "<file>", f"expected a dict, got {type(content).__name__}")
+    hparams = check_hparams(path, content.get("hyper_parameters"))
+    state = content.get("state_dict")
+    if not isinstance(state, Mapping) or not all(
+        isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state.items()
+    ):
+        raise CheckpointError(path, "state_dict", "expected a mapping of names to tensors")
+    return hparams, dict(state)
+
+
+def read_checkpoint(
+    checkpoint: str | os.PathLike, tensors: bool = True
+) -> tuple[dict[str, Any], dict[str, torch.Tensor], dict[str, Any]]:
+    """``(hparams, state_dict, card)`` of a Lightning ``.ckpt`` or a ``.safetensors`` model
+    file, read safely (see the module doc; the card of a ``.ckpt`` is empty)."""
     path = Path(checkpoint)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such checkpoint")
-    try:
-        content = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # torch raises many kinds for a file that is not a checkpoint
-        raise ValueError(f"{path}: not a readable PyTorch checkpoint ({exc})") from None
-    hp = content.get("hyper_parameters") if isinstance(content, dict) else None
-    missing = [k for k in ("scene", "normalizer", "encoding", "horizon") if k not in (hp or {})]
-    if missing:
-        raise ValueError(
-            f"{path}: not a gripdem model checkpoint (hyper_parameters lack {missing}); use "
-            "checkpoints/best.ckpt of a `python -m gripdem.run` output directory"
-        )
-    return dict(hp)
+    if not path.is_file():
+        raise CheckpointError(path, "<file>", "expected a checkpoint file, got a folder")
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head.startswith(b"PK\x03\x04") or zipfile.is_zipfile(path):  # a (maybe broken) zip
+        hparams, state = _read_lightning(path)
+        return hparams, state, {}
+    if is_safetensors(path):
+        return read_model_file(path, tensors)
+    raise CheckpointError(
+        path,
+        "<file>",
+        f"not a readable PyTorch checkpoint: expected a Lightning .ckpt (a zip file) or a "
+        f"gripdem .safetensors model file, found a file starting with {head!r}",
+    )
+
+
+def read_hparams(checkpoint: str | os.PathLike) -> dict[str, Any]:
+    """The hyperparameters of a gripdem checkpoint (a clear error for anything else)."""
+    return read_checkpoint(checkpoint, tensors=False)[0]
+
+
+def load_checkpoint_model(checkpoint: str | os.PathLike):
+    """The model of a ``.ckpt`` or ``.safetensors`` file as trained (eval mode, CPU)."""
+    hparams, state, _ = read_checkpoint(checkpoint)
+    return build_module(checkpoint, hparams, state)
+
+
+def export_run_model(
+    model, path: str | os.PathLike, run: Mapping[str, Any], metrics: Mapping[str, Any]
+) -> Path:
+    """Write ``model`` as a shareable model file with its card: the run's flat
+    hyperparameters ``run`` (scene, split, model, ...), the test metrics, gripdem's version."""
+    card = {
+        "gripdem_version": gripdem.__version__,
+        "scene": run.get("scene"),
+        "split": run.get("split"),
+        "model": run.get("model"),
+        "run": dict(run),
+        "metrics": finite_metrics(metrics),
+    }
+    return save_model_file(model, path, card, overwrite=True)
 
 
 def data_scene(meta: DatasetMeta) -> dict[str, Any]:
@@ -171,12 +290,8 @@ def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], lis
 
 def load_model(checkpoint, meta: DatasetMeta):
     """The model of ``checkpoint`` with the data's scene (after :func:`check_compatible`)."""
-    from gripdem.models.module import TrajectoryModule
-
-    model = TrajectoryModule.load_from_checkpoint(
-        str(checkpoint), map_location="cpu", scene=data_scene(meta)
-    )
-    return model.eval()
+    hparams, state, _ = read_checkpoint(checkpoint)
+    return build_module(checkpoint, hparams, state, scene=data_scene(meta))
 
 
 def _same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:

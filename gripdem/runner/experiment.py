@@ -5,7 +5,7 @@ one output directory. Everything it writes goes under that directory (Hydra does
 the working directory):
 
     tensorboard/        event files: scalars, HParams (hp/ metrics), figures as images
-    checkpoints/        best.ckpt (lowest val/rmse), last.ckpt
+    checkpoints/        best.ckpt (lowest val/rmse), last.ckpt, best.safetensors (shareable)
     predictions.h5      test windows: prediction, truth, baselines (gripdem.evaluation.predictions)
     figures/*.png       the paper's figures (gripdem.plots.run)
     trajectories/*.xyz  predicted and true trajectories for OVITO / ParaView
@@ -31,10 +31,11 @@ from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
 from gripdem.dem.output import ensure_scene_dataset
 from gripdem.evaluation.predictions import Predictions, write_predictions
-from gripdem.inference.checkpoint import data_scene
+from gripdem.inference.checkpoint import data_scene, export_run_model, load_checkpoint_model
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
+from gripdem.runner.chained_test import chained_test
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import lightning_info_muted, quiet_console
 
@@ -89,7 +90,7 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         scene=data_scene(meta),
         normalizer=dm.normalizer.to_dict(),
         encoding=model_cfg["encoding"],
-        horizon=dm.split.horizon,
+        horizon=dm.model_horizon,
         history_len=int(dm.plan.history_len),
         decoder_mode=model_cfg["decoder_mode"],
         vct_shift=model_cfg["vct_shift"],
@@ -105,6 +106,9 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         warmup_fraction=model_cfg["warmup_fraction"],
         input_noise=model_cfg["input_noise"],
         ar_prior=model_cfg["ar_prior"],
+        decoder=model_cfg["decoder"],
+        zero_mean=model_cfg["zero_mean"],
+        history_noise=model_cfg["history_noise"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),
@@ -220,7 +224,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     if cfg.resume and ckpt_path is None:
         log.warning("resume=true but %s does not exist: starting from scratch", resume)
     started = time.perf_counter()
-    trainer.fit(model, dm, ckpt_path=ckpt_path)
+    trainer.fit(model, dm, ckpt_path=ckpt_path, weights_only=True)  # never unpickle code
     train_seconds = time.perf_counter() - started
     if not trainer.is_global_zero:
         return {}
@@ -236,9 +240,12 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
             enable_checkpointing=False,
         )
     if best:  # the best validation rollout, not the last epoch
-        model = TrajectoryModule.load_from_checkpoint(best, map_location="cpu")
-    test_trainer.test(model, dm, verbose=False)
-    results = model.test_results
+        model = load_checkpoint_model(best)
+    if dm.model_horizon < dm.split.horizon:  # the surrogate path: chained over the horizon
+        results = chained_test(model, dm, logger, trainer.global_step)
+    else:
+        test_trainer.test(model, dm, verbose=False)
+        results = model.test_results
     metrics = dict(results["metrics"])
     best_score = trainer.checkpoint_callback.best_model_score
     metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
@@ -252,6 +259,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         "hp/test_rmse_cv_baseline": metrics["test/rmse_constant_velocity"],
     }
     metrics.update(hp_values)
+    export_run_model(model, out_dir / "checkpoints" / "best.safetensors", hp, metrics)
     predictions = to_predictions(results, dm, hp)
     physics, physics_report = physics_metrics(predictions)
     metrics.update(physics)
@@ -269,6 +277,8 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         # validation of the fit
         "accuracy_curve": [list(point) for point in trained.accuracy_curve],
         "in_sample": bool(dm.in_sample),
+        # the test windows' horizon was chained with the stepper (model.horizon < split's)
+        "test_chained": results.get("chained"),
         "best_checkpoint": best,
         "hparams": hp,
         "data": dm.summary(),

@@ -211,7 +211,8 @@ def test_bad_positions_are_found(tmp_path, value, message):
         h5["positions"][1, 4, 3, 2] = value
 
     path = _write_then_edit(tmp_path, edit)
-    read_meta(path)  # the cheap check does not read positions
+    with pytest.raises(DatasetError, match=message):
+        read_meta(path)  # the load-time check streams the positions
     with pytest.raises(DatasetError, match=message) as info:
         read_dataset(path)
     assert "field 'positions'" in str(info.value)

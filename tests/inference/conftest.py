@@ -11,36 +11,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import lightning as L
 import pytest
-from hydra import compose, initialize_config_dir
-
-from gripdem.run import CONFIG_DIR
-from gripdem.runner.experiment import build_datamodule, build_model
+from checkpoints import untrained_checkpoint
 
 
 def make_checkpoint(data_path: Path, out: Path, overrides: list[str]) -> Path:
     """``out/checkpoints/best.ckpt`` of the untrained smoke model on ``data_path``."""
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose(
-            "config",
-            overrides=["experiment=smoke", f"data.path={data_path}", *overrides],
-        )
-    dm = build_datamodule(cfg, Path(data_path))
-    model = build_model(cfg, dm)
-    trainer = L.Trainer(
-        max_steps=0,
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        num_sanity_val_steps=0,
-    )
-    trainer.fit(model, dm)
-    path = out / "checkpoints" / "best.ckpt"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    trainer.save_checkpoint(path)
-    return path
+    return untrained_checkpoint(data_path, out / "checkpoints" / "best.ckpt", overrides)
 
 
 @pytest.fixture(scope="session", name="make_checkpoint")

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from gripdem.boundary import Boundary, Box, LeesEdwards
+from gripdem.boundary import Boundary, Box, LeesEdwards, brute_force_pairs
 from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
 from gripdem.evaluation.evaluate import evaluate_predictions
 from gripdem.evaluation.predictions import read_predictions
@@ -25,7 +25,8 @@ def run(checkpoint, data, out, *extra):
 def test_predict_writes_predictions_trajectory_and_report(tmp_path, capsys, le_file, le_checkpoint):
     out = tmp_path / "pred.h5"
     # start 25: frames 25..30 observed, 31..39 have a truth, 40..52 do not
-    assert run(le_checkpoint, le_file, out, "--start", 25, "--frames", 22, "--sims", 0, 2) == 0
+    args = ("--start", 25, "--frames", 22, "--sims", 0, 2, "--no-correction")
+    assert run(le_checkpoint, le_file, out, *args) == 0
     printed = capsys.readouterr().out
     assert "predicted 22 of 22 frame(s) (31..52) in links of 5" in printed
     assert "constant_velocity" in printed and "note: in-sample check" in printed
@@ -52,6 +53,27 @@ def test_predict_writes_predictions_trajectory_and_report(tmp_path, capsys, le_f
     # existing outputs are kept
     assert run(le_checkpoint, le_file, out, "--start", 25) == 1
     assert "refusing to overwrite" in capsys.readouterr().err
+
+
+def test_predict_corrects_contacts_by_default(tmp_path, le_file, le_checkpoint):
+    """The stable setting (the default): no predicted pair closer than a diameter, although the
+    random walk of the data (and so constant velocity) packs particles into each other."""
+    out = tmp_path / "pred.h5"
+    assert run(le_checkpoint, le_file, out, "--start", 25, "--frames", 12) == 0
+    report = json.loads((tmp_path / "pred_rollout.json").read_text())
+    assert report["settings"]["contact_correction"] is True
+    trajectory = read_dataset(tmp_path / "pred_trajectory.h5")
+    offsets = trajectory.offsets()
+    d = trajectory.diameter
+    for s in range(trajectory.n_sims):
+        for t in range(6, trajectory.n_frames):
+            i, j, vec = brute_force_pairs(
+                trajectory.positions[s, t], trajectory.box, offsets[s, t], d
+            )
+            assert (np.linalg.norm(vec, axis=1) > d * (1 - 2e-4)).all(), (s, t)
+    p = read_predictions(out)
+    cv = p.baselines["constant_velocity"]
+    assert np.abs(p.pred_positions - cv).max() > 1e-3 * d  # the correction moved particles
 
 
 def test_predict_from_the_last_frames_writes_the_rollout_only(

@@ -47,7 +47,7 @@ def test_nan_loss_stops_training_and_keeps_the_last_good_checkpoint(tmp_path, ti
     )
     with pytest.raises(FloatingPointError, match=r"non-finite training loss .* global step 2"):
         trainer.fit(model, dm)
-    last = torch.load(tmp_path / "last.ckpt", weights_only=False)
+    last = torch.load(tmp_path / "last.ckpt", weights_only=True)
     assert last["epoch"] == 0
     bad = [
         k for k, v in last["state_dict"].items() if v.is_floating_point() and not v.isfinite().all()

@@ -166,6 +166,7 @@ def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request,
     for name in (*figures, "physics"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 5000
     assert (out / "checkpoints" / "best.ckpt").exists()
+    assert (out / "checkpoints" / "best.safetensors").exists()  # the shareable model file
     assert (out / "trajectories" / "window000_pred.xyz").exists()
     with h5py.File(out / "predictions.h5") as h5:
         pred = h5["pred_positions"][()]
@@ -179,3 +180,22 @@ def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request,
         assert math.isfinite(metrics[f"test/physics/{name}/non_affine_rms_over_d"]), name
     assert ("test/crossers/n" in metrics) == (scene == "lebc")
     assert {"test/physics/model/gr_distance", "test/physics/truth/coordination_contact"} <= scalars
+
+
+def test_a_short_horizon_model_is_tested_chained_over_the_split(
+    tmp_path, monkeypatch, gripdem_data_root, tiny_lebc_path
+):
+    """``model.horizon`` shorter than the split's: trained on its own horizon, tested on the
+    split's windows through the in-memory stepper (contact correction on), every baseline
+    beside it on the same windows."""
+    cfg, out, report = run_smoke(
+        tmp_path, monkeypatch, gripdem_data_root, ["scene=lebc", "model.horizon=2"]
+    )
+    metrics = json.loads((out / "metrics.json").read_text())
+    f = int(cfg.split.horizon)
+    assert f > 2 and report["test_chained"]["model_horizon"] == 2
+    assert report["test_chained"]["contact_correction"] is True
+    assert all(math.isfinite(metrics[f"test/rmse_step/{j:03d}"]) for j in range(1, f + 1))
+    with h5py.File(out / "predictions.h5") as h5:
+        assert h5["pred_positions"].shape[1] == f
+    assert math.isfinite(metrics["test/rmse_ratio_constant_velocity"])

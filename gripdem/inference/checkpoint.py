@@ -53,6 +53,7 @@ from gripdem.inference.model_file import (
     read_model_file,
     save_model_file,
 )
+from gripdem.inference.pretrained import resolve as resolve_pretrained
 
 __all__ = [
     "CheckpointError",
@@ -134,8 +135,9 @@ def read_checkpoint(
     checkpoint: str | os.PathLike, tensors: bool = True
 ) -> tuple[dict[str, Any], dict[str, torch.Tensor], dict[str, Any]]:
     """``(hparams, state_dict, card)`` of a Lightning ``.ckpt`` or a ``.safetensors`` model
-    file, read safely (see the module doc; the card of a ``.ckpt`` is empty)."""
-    path = Path(checkpoint)
+    file, read safely (see the module doc; the card of a ``.ckpt`` is empty). ``pretrained:NAME``
+    names a model shipped with gripdem (:mod:`gripdem.inference.pretrained`)."""
+    path = resolve_pretrained(checkpoint)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such checkpoint")
     if not path.is_file():

@@ -51,7 +51,7 @@ ENCODER_OPTIONS = {
         "edge_feature_dim",
         "dense_init",
     ),
-    "interaction": ("channels", "rounds", "edge_history", "position_features"),
+    "interaction": ("channels", "rounds", "edge_history", "edge_updates", "position_features"),
 }
 LR_SCHEDULES = ("constant", "cosine")
 DECODERS = ("gru", "direct")

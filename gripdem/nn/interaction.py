@@ -104,6 +104,8 @@ class InteractionEncoder(nn.Module):
         channels: latent size of nodes and edges.
         rounds: message-passing rounds.
         edge_history: relative-motion steps per pair (the last ones, <= K).
+        edge_updates: update the edge latents between rounds (False: every round reads the
+            encoded edge inputs; ~40 % fewer pair evaluations).
     """
 
     def __init__(
@@ -113,6 +115,7 @@ class InteractionEncoder(nn.Module):
         channels: int = 64,
         rounds: int = 3,
         edge_history: int = 3,
+        edge_updates: bool = True,
     ):
         super().__init__()
         if rounds < 1:
@@ -126,7 +129,9 @@ class InteractionEncoder(nn.Module):
         c = channels
         self.message = nn.ModuleList(PairMLP(c, c, c, c) for _ in range(rounds))
         # the edges are updated between rounds (the last round's update would be unused)
-        self.edge_update = nn.ModuleList(PairMLP(c, c, c, c) for _ in range(rounds - 1))
+        self.edge_update = nn.ModuleList(
+            PairMLP(c, c, c, c) for _ in range(rounds - 1 if edge_updates else 0)
+        )
         self.node_update = nn.ModuleList(
             mlp(2 * channels, channels, channels) for _ in range(rounds)
         )

@@ -98,6 +98,7 @@ class EncoderSchema:
     # interaction
     rounds: int = 3
     edge_history: int = 3
+    edge_updates: bool = True
     position_features: PositionFeatures = PositionFeatures.auto
 
 
@@ -120,6 +121,7 @@ class ModelSchema:
     input_noise: float = 0.0
     ar_prior: bool = False
     horizon: Optional[int] = None
+    init_from: Optional[str] = None
     decoder: str = "gru"
     zero_mean: bool = False
     history_noise: float = 0.0

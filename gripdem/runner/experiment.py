@@ -31,13 +31,19 @@ from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
 from gripdem.dem.output import ensure_scene_dataset
 from gripdem.evaluation.predictions import Predictions, write_predictions
-from gripdem.inference.checkpoint import data_scene, export_run_model, load_checkpoint_model
+from gripdem.inference.checkpoint import (
+    data_scene,
+    export_run_model,
+    load_checkpoint_model,
+    load_model,
+)
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
 from gripdem.runner.chained_test import chained_test
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import lightning_info_muted, quiet_console
+from gripdem.runner.finetune import initialise, load_source
 
 log = logging.getLogger(__name__)
 
@@ -198,10 +204,22 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
     label = "test (IN-SAMPLE: trained on these windows)" if in_sample else "test (out of sample)"
     rows = [f"| {label} | RMSE (m) | RMSE / d | model / this |", "|---|---|---|---|"]
     model = metrics.get("test/rmse", math.nan)
-    for name, key in [("model", "test/rmse")] + [(b, f"test/rmse_{b}") for b in BASELINES]:
+    names = [("model", "test/rmse")]
+    if "before/test/rmse" in metrics:  # fine-tuned: the source model as it was, same windows
+        names = [("model (fine-tuned)", "test/rmse"), ("before fine-tuning", "before/test/rmse")]
+    for name, key in names + [(b, f"test/rmse_{b}") for b in BASELINES]:
         value = metrics.get(key, math.nan)
         rows.append(f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} |")
     return "\n".join(rows)
+
+
+def test_model(model, dm: TrajectoryDataModule, test_trainer, logger, step: int) -> dict:
+    """The test windows: chained with the stepper when the model's horizon is shorter than the
+    split's (the surrogate path), else Lightning's test step; what ``model.test_results`` holds."""
+    if dm.model_horizon < dm.split.horizon:
+        return chained_test(model, dm, logger, step)
+    test_trainer.test(model, dm, verbose=False)
+    return model.test_results
 
 
 def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
@@ -214,7 +232,14 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     L.seed_everything(int(cfg.seed), workers=True)
     data_path = resolve_data_path(cfg)
     dm = build_datamodule(cfg, data_path)
+    source = load_source(cfg)  # fine-tuning: start from a trained model (model.init_from)
+    if source is not None:
+        dm.load_state_dict(
+            {"normalizer": source.normalizer.to_dict(), "encoding": dm.encoding_name}
+        )
     model = build_model(cfg, dm)
+    if source is not None:
+        initialise(model, source, str(cfg.model.init_from))
     logger = TensorBoardLogger(**plain(cfg.logger))
     hp = hparams(cfg, dm)
     logger.log_hyperparams(hp, metrics={key: math.nan for key in HP_METRICS})
@@ -241,12 +266,12 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         )
     if best:  # the best validation rollout, not the last epoch
         model = load_checkpoint_model(best)
-    if dm.model_horizon < dm.split.horizon:  # the surrogate path: chained over the horizon
-        results = chained_test(model, dm, logger, trainer.global_step)
-    else:
-        test_trainer.test(model, dm, verbose=False)
-        results = model.test_results
+    results = test_model(model, dm, test_trainer, logger, trainer.global_step)
     metrics = dict(results["metrics"])
+    if source is not None:  # the source model as it was, on the same test windows
+        as_is = load_model(cfg.model.init_from, dm.meta)  # its own AR prior, the data's scene
+        before = test_model(as_is, dm, test_trainer, None, 0)
+        metrics.update({f"before/{k}": v for k, v in before["metrics"].items()})
     best_score = trainer.checkpoint_callback.best_model_score
     metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
     metrics["train_seconds"] = train_seconds

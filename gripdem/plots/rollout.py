@@ -60,7 +60,11 @@ def plot_surrogate(scene: dict, title: str) -> Figure:
         )
     ax.axhline(100 * TARGETS["overlap"], color="C1", ls="--", label="target 1 %")
     ax.set(xlabel="predicted frame", ylabel="% particles with a neighbour < 0.98 d")
-    ax.set_title("overlap (after the contact correction)", fontsize=9)
+    corrected = scene.get("settings", {}).get("contact_correction", True)
+    ax.set_title(
+        "overlap" + (" (after the contact correction)" if corrected else " (no correction)"),
+        fontsize=9,
+    )
     ax.legend(fontsize=7)
     ax = axes[2]
     ax.plot(

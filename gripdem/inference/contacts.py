@@ -112,19 +112,20 @@ def push_apart(
     pairs = _select(q, s.i, s.j, cell_part, CANDIDATE_MARGIN * distance)
     moved = np.zeros_like(q)
     limit = 0.25 * margin * margin
-    before, worst_before, _ = _sweep(
-        q, s.i, s.j, cell_part, pairs, distance, slack, moved, limit, False
+    # each sweep counts the overlaps it meets and pushes them apart; the first sweep's count is
+    # the frame's overlaps before the correction, a sweep that meets none ends it
+    before, worst_before, far = _sweep(
+        q, s.i, s.j, cell_part, pairs, distance, slack, moved, limit, True
     )
-    after, worst_after, done = before, worst_before, 0
-    while after and done < sweeps:
-        _, _, far = _sweep(q, s.i, s.j, cell_part, pairs, distance, slack, moved, limit, True)
-        done += 1
+    after, worst_after, done = before, worst_before, 1
+    while after and done <= sweeps:
         if far:  # an outside pair may touch now: choose the candidates again
             pairs = _select(q, s.i, s.j, cell_part, CANDIDATE_MARGIN * distance)
             moved[:] = 0.0
-        after, worst_after, _ = _sweep(
-            q, s.i, s.j, cell_part, pairs, distance, slack, moved, limit, False
+        after, worst_after, far = _sweep(
+            q, s.i, s.j, cell_part, pairs, distance, slack, moved, limit, True
         )
+        done += 1
     worst_before, worst_after = max(worst_before, 0.0) / distance, max(worst_after, 0.0) / distance
     shift = q - start
     rms = float(np.sqrt(np.einsum("nc,nc->n", shift, shift).mean())) if len(q) else 0.0

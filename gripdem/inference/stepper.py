@@ -54,7 +54,7 @@ class StepperSettings:
     link: int | None = None
     contact_correction: bool = True
     contact_distance: float = 1.0
-    correction_sweeps: int = 20
+    correction_sweeps: int = 50
     skin: float = 0.3
     compile: bool = False
 

@@ -35,6 +35,7 @@ from gripdem.evaluation.metrics import rmse
 #: velocity may change by 2 % under autocast, and the RMSE by 1 %
 BF16_CORRECTION_TOLERANCE = 0.02
 BF16_RMSE_TOLERANCE = 0.01
+PERTURB_SCALE = {"interaction": 0.1, "grip": 0.05}
 
 
 @pytest.mark.parametrize("scene", ["pbc", "lebc"])
@@ -47,7 +48,8 @@ def test_bf16_autocast_on_cpu_stays_within_tolerance_of_float32(request, scene, 
     1e-5)."""
     path = request.getfixturevalue(f"tiny_{scene}_path")
     model, dm = smoke_model(path, f"scene={scene}", f"model={model_name}")
-    perturb(model)
+    # the direct head starts at zero and its mean is removed: it needs a larger nudge to matter
+    perturb(model, scale=PERTURB_SCALE[model_name])
     pred32, true, offsets, batches = predict_windows(model, dm)
     pred16, *_ = predict_windows(model, dm, autocast=True)
     box = model.boundary.box

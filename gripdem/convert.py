@@ -3,10 +3,14 @@
 Usage::
 
     python -m gripdem.convert fordatis ARCHIVE OUT.h5 [--shear-rate K] [--le-sign {+1,-1}]
-        [--time-origin T] [--drop-frames N] [--diameter D] [--overwrite]
+        [--time-origin T] [--drop-frames N] [--diameter D] [--body-force A] [--overwrite]
     python -m gripdem.convert lammps DUMP [DUMP ...] OUT.h5 --diameter D --timestep DT
         [--shear-rate K] [--axes yzx] [--le-sign {+1,-1}] [--time-origin T] [--split-files]
-        [--overwrite]
+        [--body-force A] [--overwrite]
+
+``--body-force A`` records the periodic scene's drive ``a_z = A cos(2 pi x / lx)`` (m/s^2 for
+SI data) in the dataset's ``body_force_amplitude`` (periodic data only; a model trained with a
+drive is applied only to data recorded with it): :mod:`gripdem.formats.drive`.
 
 One subcommand per source format. The
 output is written atomically by :func:`gripdem.data.dataset_io.write_dataset` and an existing file
@@ -65,6 +69,7 @@ def format_fordatis_report(report: ImportReport) -> list[str]:
             f"{whose})",
             f"LE time origin: {le.time_origin:.6g} s (delta = 0 there)",
         ]
+    out += report.drive
     if report.evidence is not None:
         out += ["evidence: " + line for line in report.evidence.lines()]
     out += [f"note: {note}" for note in report.notes]
@@ -88,6 +93,7 @@ def _fordatis(args: argparse.Namespace) -> int:
         time_origin=args.time_origin,
         drop_frames=args.drop_frames,
         diameter=args.diameter,
+        body_force=args.body_force,
     )
     for line in format_fordatis_report(report):
         print(line)
@@ -118,6 +124,7 @@ def _lammps(args: argparse.Namespace) -> int:
         le_sign=args.le_sign,
         time_origin=args.time_origin,
         split_files=args.split_files,
+        body_force=args.body_force,
     )
     for line in report.lines():
         print(line)
@@ -128,6 +135,16 @@ def _lammps(args: argparse.Namespace) -> int:
         + f", {path.stat().st_size / 1e6:.3g} MB"
     )
     return 0
+
+
+def _add_body_force(parser: argparse.ArgumentParser, units: str) -> None:
+    parser.add_argument(
+        "--body-force",
+        type=float,
+        metavar="A",
+        help=f"periodic data driven by a_z = A cos(2 pi x / lx) along z: the amplitude A ({units}),"
+        " recorded as body_force_amplitude (default 0: no drive; Lees-Edwards data has none)",
+    )
 
 
 def _add_lammps(sub) -> None:
@@ -178,6 +195,7 @@ def _add_lammps(sub) -> None:
         action="store_true",
         help="every dump file is its own simulation (default: all files are one simulation)",
     )
+    _add_body_force(lammps, "the dump's units: m/s^2 with units si")
     lammps.add_argument("--overwrite", action="store_true", help="replace OUT.h5 if it exists")
     lammps.set_defaults(run=_lammps)
 
@@ -234,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"particle diameter in m (the files carry none; default {DEFAULT_DIAMETER:g}, the "
         "paper's size read as a diameter)",
     )
+    _add_body_force(fordatis, "m/s^2")
     fordatis.add_argument("--overwrite", action="store_true", help="replace OUT.h5 if it exists")
     fordatis.set_defaults(run=_fordatis)
     _add_lammps(sub)

@@ -20,6 +20,10 @@ written as
   ``--timestep``, default the frame interval), which ``python -m gripdem.convert lammps`` reads
   back to the same positions.
 
+OVITO (``ovito.io.import_file``) reads all three, ASE (``ase.io.read``) the extended XYZ, the
+dump and ``--atom-style atomic`` data files (its ``lammps-data`` reader has no ``sphere`` style),
+each with the LE lattice of the frame (tests/formats/test_viewers.py).
+
 Velocities: the file's own where it stores them, else the mean velocity over the last frame
 interval, ``lattice-continuous step (F-1 -> F) / dt`` in the image cell each particle occupies at
 frame F (so a particle that just crossed an LE face carries the jumped velocity). The engine's

@@ -8,21 +8,29 @@ and the prediction load as two pipelines that can be overlaid or compared frame 
 Frame 0 is the last observed frame (identical in both files), frames 1..f the horizon. Each
 frame's comment line::
 
-    Lattice="lx 0 0 0 ly 0 0 0 lz" Origin="-lx/2 -ly/2 -lz/2" pbc="T T T"
+    Lattice="lx 0 delta 0 ly 0 0 0 lz" Origin="-lx/2 -ly/2 -lz/2" pbc="T T T"
     Properties=species:S:1:pos:R:3:radius:R:1:id:I:1:crosser:I:1[:error:R:1]
     Time=<s> step=<j> window=<w> boundary=<kind> le_offset=<delta>
 
-The cell written is the orthorhombic box that the wrapped positions fill (not the sheared LE
-cell, whose parallelepiped the wrapped positions do not fill); the LE offset delta of the frame
-is given as ``le_offset`` (the +x image is shifted by ``le_offset`` along z). ``crosser`` is 1
-for particles whose truth crosses an x face during the horizon, ``error`` (prediction files
-only) the minimum-image distance to the truth at that frame. Lengths are in the data's units
-(metres by default); particles have species ``P``.
+The cell is the lattice of the periodic images at that frame: in the Lees-Edwards scene the LE
+lattice ``(lx, 0, delta), (0, ly, 0), (0, 0, lz)`` with the frame's offset delta (the +x image
+is shifted by delta along z; ``le_offset`` repeats it), so a viewer that repeats the cell
+(OVITO's Replicate, ASE's neighbour lists) draws and finds the right images across the x
+faces; in the periodic scene the box (delta = 0). Positions are moved into that parallelepiped
+(:func:`gripdem.boundary.wrap_into_sheared_cell`: only whole lattice vectors added, the same
+images), so the atoms lie inside the cell the viewer draws from ``Origin`` (ASE, which ignores
+``Origin``, keeps it in ``atoms.info``). ``crosser`` is 1 for particles whose truth crosses an x
+face during the horizon, ``error`` (prediction files only) the minimum-image distance to the
+truth at that frame. Lengths are in the data's units (metres by default; OVITO's analysis
+modifiers call a cell of ~1e-14 m^3 degenerate: scale it first, e.g. an
+``AffineTransformationModifier`` by 1e6 for micrometres); particles have species ``P``.
 
-LAMMPS text dumps (``ITEM: ATOMS id type x y z radius``) with an orthogonal box in gripdem's
-axes are written by :func:`write_lammps_dump` for tools that prefer them; the LE offset goes into
-nothing there. For LE data that LAMMPS (and ``gripdem.convert lammps``) should read as a sheared
-box, use ``python -m gripdem.handback --dump`` (LAMMPS's axes, the offset as the xy tilt).
+LAMMPS text dumps (``ITEM: ATOMS id type x y z radius``) are written by
+:func:`write_lammps_dump`: periodic data in an orthogonal box in gripdem's axes; Lees-Edwards
+data as LAMMPS stores a sheared box (the only form its dumps have: a lower axis tilted along a
+higher one), in LAMMPS's axes, ours (x, y, z) = LAMMPS (y, z, x), tilt ``xy`` = the frame's
+offset, atoms inside the tilted cell: LAMMPS, OVITO, ASE and ``gripdem.convert lammps`` read
+it as the LE lattice (as ``python -m gripdem.handback --dump`` writes).
 """
 
 from __future__ import annotations
@@ -33,10 +41,12 @@ from pathlib import Path
 
 import numpy as np
 
+from gripdem.boundary import Box, wrap_into_sheared_cell
 from gripdem.data.h5io import atomic_write_text
 from gripdem.evaluation import metrics
 from gripdem.evaluation.predictions import Predictions, read_predictions
 from gripdem.formats.lammps_dump import dump_text
+from gripdem.formats.lammps_series import AxisMap
 
 FLOAT = "%.12g"
 
@@ -81,13 +91,15 @@ def extxyz_text(
     cross = np.zeros(n, int) if crossers is None else crossers.astype(int)
     buf = io.StringIO()
     for j, frame in enumerate(positions):
+        delta = float(offsets[j])
         buf.write(f"{n}\n")
         buf.write(
-            f'Lattice="{lx!r} 0 0 0 {ly!r} 0 0 0 {lz!r}" '
+            f'Lattice="{lx!r} 0 {delta!r} 0 {ly!r} 0 0 0 {lz!r}" '
             f'Origin="{-lx / 2!r} {-ly / 2!r} {-lz / 2!r}" pbc="T T T" '
             f"Properties={props} Time={float(times[j])!r} step={j} window={window} "
-            f"boundary={p.boundary.kind} le_offset={float(offsets[j])!r}\n"
+            f"boundary={p.boundary.kind} le_offset={delta!r}\n"
         )
+        frame = wrap_into_sheared_cell(frame, p.box, delta)
         columns = [frame[:, 0], frame[:, 1], frame[:, 2], radius, ids, cross]
         fmt = f"P {FLOAT} {FLOAT} {FLOAT} {FLOAT} %d %d"
         if errors is not None:
@@ -137,15 +149,26 @@ def write_lammps_dump(
     radius: float,
     timesteps: np.ndarray | None = None,
     overwrite: bool = False,
+    offsets: np.ndarray | None = None,
 ) -> Path:
-    """LAMMPS text dump of ``positions`` ``(frames, particles, 3)`` in an orthogonal box
-    centred at the origin (``ITEM: ATOMS id type x y z radius``, type 1)."""
+    """LAMMPS text dump of ``positions`` ``(frames, particles, 3)`` (``ITEM: ATOMS id type x y
+    z radius``, type 1) in a box centred at the origin: orthogonal in gripdem's axes, or with
+    ``offsets`` (the LE offset of every frame) sheared, in LAMMPS's axes (ours (x, y, z) =
+    LAMMPS (y, z, x)) with tilt ``xy`` = the offset and the atoms inside the tilted cell."""
     positions = np.asarray(positions, dtype=np.float64)
     frames, n, _ = positions.shape
     steps = np.arange(frames) if timesteps is None else np.asarray(timesteps)
     lengths = np.asarray(box_lengths, dtype=np.float64)
+    tilt = None
+    if offsets is not None:
+        offsets = np.asarray(offsets, dtype=np.float64).reshape(frames)
+        axes = AxisMap.for_tilt(0)
+        inside = wrap_into_sheared_cell(positions, Box.from_lengths(lengths), offsets[:, None])
+        positions, lengths = axes.to_lammps(inside), axes.to_lammps(lengths)
+        tilt = np.zeros((frames, 3))
+        tilt[:, 0] = offsets
     text = dump_text(
-        steps, -0.5 * lengths, lengths, positions, None, {"radius": np.full(n, radius)}, None, FLOAT
+        steps, -0.5 * lengths, lengths, positions, tilt, {"radius": np.full(n, radius)}, None, FLOAT
     )
     return atomic_write_text(path, text, overwrite)
 
@@ -157,9 +180,10 @@ def export_lammps(
     overwrite: bool = False,
 ) -> dict[str, Path]:
     """``window<www>_true.dump`` and ``window<www>_pred.dump`` of one window (frame 0 = last
-    observed; TIMESTEP = horizon step)."""
+    observed; TIMESTEP = horizon step; a sheared box as :func:`write_lammps_dump` writes it)."""
     p = source if isinstance(source, Predictions) else read_predictions(source)
     out: dict[str, Path] = {}
+    _, offsets = _frame_info(p, window)
     for name, positions in _trajectories(p, window).items():
         if name in ("true", "pred"):
             key = f"window{window:03d}_{name}"
@@ -169,5 +193,6 @@ def export_lammps(
                 p.box.lengths,
                 p.radius,
                 overwrite=overwrite,
+                offsets=offsets if p.boundary.is_lees_edwards else None,
             )
     return out

@@ -42,6 +42,7 @@ import numpy as np
 import gripdem
 from gripdem.boundary import Boundary, Box, check_volume_fraction, wrap_positions
 from gripdem.data.schema import TIME_RTOL, TrajectoryData, validate
+from gripdem.formats.drive import check_amplitude, check_periodic, drive_lines
 from gripdem.formats.fordatis_files import (
     BOX_RTOL,
     FordatisError,
@@ -74,6 +75,8 @@ class ImportReport:
     frame_interval: float
     evidence: LeEvidence | None
     notes: list[str] = field(default_factory=list)
+    body_force_amplitude: float = 0.0
+    drive: list[str] = field(default_factory=list)
 
 
 # --------------------------------------------------------------------------------------------
@@ -161,15 +164,20 @@ def read_fordatis(
     time_origin: float | None = None,
     drop_frames: int = 0,
     diameter: float = DEFAULT_DIAMETER,
+    body_force: float | None = None,
 ) -> tuple[TrajectoryData, ImportReport]:
     """Import an archive (or one HDF5 file) of the authors' format.
 
     ``shear_rate=None`` means periodic data (checked: particles crossing the x faces must not
     jump in z). With a shear rate the data is Lees-Edwards; ``le_sign`` and ``time_origin`` are
-    inferred when not given, and verified when given. Returns the validated dataset (positions
-    ``(sims, frames, particles, 3)`` wrapped) and a report of what was found.
+    inferred when not given, and verified when given. ``body_force``: the amplitude A of the
+    periodic drive ``A cos(2 pi x / lx)`` along z (:mod:`gripdem.formats.drive`; periodic data
+    only). Returns the validated dataset (positions ``(sims, frames, particles, 3)`` wrapped)
+    and a report of what was found.
     """
     _check_options(shear_rate, le_sign, time_origin, drop_frames, diameter)
+    amplitude = check_amplitude(body_force)
+    check_periodic(amplitude, shear_rate is not None, f"--shear-rate {shear_rate}: ")
     source = Path(source)
     skipped: list[str] = []
     with (
@@ -204,11 +212,13 @@ def read_fordatis(
     boundary = Boundary(box, lees_edwards)
     offsets = boundary.offset(times)[..., None]
     positions = wrap_positions(positions, box, offsets if lees_edwards is not None else None)
+    drive, drive_notes = drive_lines(amplitude, boundary, positions, times)
     data = TrajectoryData(
         positions=positions,
         times=times,
         boundary=boundary,
         radius=0.5 * diameter,
+        body_force_amplitude=amplitude,
         provenance={
             "generator": "gripdem.formats.fordatis",
             "version": gripdem.__version__,
@@ -219,6 +229,7 @@ def read_fordatis(
                 "frames": n_frames,
                 "diameter": diameter,
                 "shear_rate": shear_rate,
+                "body_force_amplitude": amplitude,
                 "le_sign_given": le_sign,
                 "time_origin_given": time_origin,
                 "le_inference": None if evidence is None else evidence.lines(),
@@ -241,6 +252,8 @@ def read_fordatis(
         volume_fraction=phi,
         frame_interval=interval,
         evidence=evidence,
-        notes=notes,
+        notes=notes + drive_notes,
+        body_force_amplitude=amplitude,
+        drive=drive,
     )
     return data, report

@@ -48,6 +48,7 @@ from gripdem.boundary import (
     wrap_positions,
 )
 from gripdem.data.schema import TrajectoryData, validate
+from gripdem.formats.drive import check_amplitude, check_periodic, drive_lines
 from gripdem.formats.lammps_dump import DumpError
 from gripdem.formats.lammps_series import AxisMap, DumpSeries, read_series
 from gripdem.formats.lammps_tilt import check_crossers, tilt_lees_edwards
@@ -73,6 +74,7 @@ class LammpsReport:
     evidence: LeEvidence | None
     tilt: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    drive: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
         box, first = self.boundary.box, self.series[0]
@@ -99,6 +101,7 @@ class LammpsReport:
                 f"LE sign: {le.sign:+d} (+x image shifted by {'+' if le.sign > 0 else '-'}delta)",
                 f"LE time origin: {le.time_origin:.6g} (delta = 0 there)",
             ]
+        out += self.drive
         out += [f"tilt: {line}" for line in self.tilt]
         if self.evidence is not None:
             out += ["evidence: " + line for line in self.evidence.lines()]
@@ -155,11 +158,16 @@ def read_lammps(
     le_sign: int | None = None,
     time_origin: float | None = None,
     split_files: bool = False,
+    body_force: float | None = None,
 ) -> tuple[TrajectoryData, LammpsReport]:
-    """Import LAMMPS text dumps; returns the validated dataset and a report. Raises
+    """Import LAMMPS text dumps; returns the validated dataset and a report. ``body_force``:
+    the amplitude A of the periodic drive ``A cos(2 pi x / lx)`` along our z, in the dump's
+    units (:mod:`gripdem.formats.drive`; periodic data only). Raises
     :class:`~gripdem.formats.lammps_dump.DumpError` (a ``DatasetError``) naming the file, item
     and snapshot, or ``ValueError`` for a bad option; nothing is written here."""
     _check_options(diameter, timestep, shear_rate, le_sign, time_origin)
+    amplitude = check_amplitude(body_force)
+    check_periodic(amplitude, shear_rate is not None, f"--shear-rate {shear_rate}: ")
     paths = [Path(p) for p in paths]
     if not paths:
         raise ValueError("give at least one dump file")
@@ -226,6 +234,9 @@ def read_lammps(
         offsets = None if le is None else boundary.offset(times)[..., None]
         wrapped = wrap_positions(reference, box, offsets, velocities, boundary.image_velocity)
         positions, velocities = wrapped if velocities is not None else (wrapped, None)
+    check_periodic(amplitude, boundary.is_lees_edwards, f"{series[0].label}: ")
+    drive, drive_notes = drive_lines(amplitude, boundary, positions, times)
+    notes += drive_notes
     radii = series[0].radii
     if radii is not None:
         if np.allclose(radii, 0.5 * diameter, rtol=1e-6):
@@ -246,6 +257,7 @@ def read_lammps(
         times=times,
         boundary=boundary,
         radius=0.5 * diameter,
+        body_force_amplitude=amplitude,
         velocities=velocities,
         radii=radii,
         provenance={
@@ -256,6 +268,7 @@ def read_lammps(
                 "timestep": timestep,
                 "diameter": diameter,
                 "shear_rate_given": shear_rate,
+                "body_force_amplitude": amplitude,
                 "axes": axes_map.name,
                 "coordinates": series[0].kind,
                 "timesteps": [
@@ -279,5 +292,6 @@ def read_lammps(
         evidence=evidence,
         tilt=tilt_lines,
         notes=notes,
+        drive=drive,
     )
     return data, report

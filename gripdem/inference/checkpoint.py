@@ -7,11 +7,14 @@ cut-off and the fitted linear AR baseline. :func:`check_compatible` decides whet
 is a scene the model can be applied to, and refuses the rest with an
 :class:`IncompatibleError` naming the data file, the field and the checkpoint:
 
-- same boundary kind, particle diameter and frame interval (relative tolerance
-  ``SCENE_RTOL``), and in a sheared box the same signed shear rate (the flow direction);
-- the same box, except for models that read relative geometry only (the exact frame,
+- the same boundary kind, and in a sheared box the same flow direction (sign of the signed
+  shear rate);
+- box, particle diameter, frame interval, shear rate and body-force amplitude within
+  ``SCENE_TOLERANCE`` (1 %) of the training scene's, each difference printed as a note
+  (:mod:`gripdem.inference.scene_match`: every model's inputs are dimensionless; which depends
+  on which parameter); models that read relative geometry only (the exact frame,
   ``encoding=unwrapped``, with the ``grip`` decoder, in a sheared box, without x-position
-  features): those are applied in the data's box;
+  features) are applied in any box;
 - the paper's dense n x n graph (``trainable_graph=dense``) only at its own particle count.
 
 The LE time origin and sign convention of the data are the data's own: :func:`load_model`
@@ -54,8 +57,10 @@ from gripdem.inference.model_file import (
     save_model_file,
 )
 from gripdem.inference.pretrained import resolve as resolve_pretrained
+from gripdem.inference.scene_match import SCENE_TOLERANCE, compare
 
 __all__ = [
+    "SCENE_TOLERANCE",
     "CheckpointError",
     "IncompatibleError",
     "check_compatible",
@@ -66,11 +71,6 @@ __all__ = [
     "read_hparams",
     "training_overlap",
 ]
-
-#: diameter, frame interval and shear rate must agree within this relative tolerance
-SCENE_RTOL = 1e-3
-#: box lengths agree within this relative tolerance
-BOX_RTOL = 1e-6
 
 
 class IncompatibleError(ValueError):
@@ -199,15 +199,39 @@ def _close(a: float, b: float, rtol: float) -> bool:
     return abs(a - b) <= rtol * max(abs(a), abs(b))
 
 
+def _relative_only(hp: dict[str, Any], sheared: bool) -> bool:
+    """Exact-frame grip models of a sheared scene without x-position features read relative
+    geometry only: they are applied in any box."""
+    encoder = dict(hp.get("encoder") or {})
+    return (
+        hp["encoding"] == "unwrapped"
+        and hp.get("decoder_mode") == "grip"
+        and sheared
+        and str(encoder.get("position_features", "auto")).lower() != "true"
+    )
+
+
 def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], list[str]]:
     """The checkpoint's hyperparameters if it can be applied to ``meta``'s data, and notes on
-    what differs harmlessly; raises :class:`IncompatibleError` otherwise."""
+    what differs within the tolerance; raises :class:`IncompatibleError` otherwise.
+
+    Box, diameter, frame interval, shear rate and body-force amplitude may differ from the
+    training scene's by :data:`~gripdem.inference.scene_match.SCENE_TOLERANCE` (1 %): every
+    model reads dimensionless inputs, and within 1 % of the training scene they move less than
+    between two simulations of that scene (:mod:`gripdem.inference.scene_match` says which
+    input depends on which parameter). Each difference is a note; beyond the tolerance the
+    field is refused with both values. Always refused: another boundary kind, the opposite
+    flow direction, the dense n x n graph at another particle count."""
     checkpoint = Path(checkpoint)
     hp = read_hparams(checkpoint)
     scene, data, notes = hp["scene"], data_scene(meta), []
 
     def fail(field: str, message: str) -> IncompatibleError:
         return IncompatibleError(meta.path, checkpoint, field, message)
+
+    def add(note: str | None) -> None:
+        if note is not None:
+            notes.append(note)
 
     if hp["encoding"] not in ENCODINGS:
         raise fail("encoding", f"the model's encoding {hp['encoding']!r} is unknown here")
@@ -217,65 +241,44 @@ def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], lis
             f"the model was trained on {scene['boundary']!r} data, the file holds "
             f"{data['boundary']!r}",
         )
-    for key, what in (("diameter", "particle diameter"), ("frame_interval", "frame interval")):
-        if not _close(float(scene[key]), float(data[key]), SCENE_RTOL):
-            raise fail(
-                key,
-                f"the model was trained with {what} {scene[key]:.6g}, the data has "
-                f"{data[key]:.6g} (relative tolerance {SCENE_RTOL:g}): it predicts one frame "
-                "of that scene per step",
-            )
-    if "body_force_amplitude" in scene and not _close(
-        float(scene["body_force_amplitude"]), float(data["body_force_amplitude"]), SCENE_RTOL
-    ):
-        raise fail(
-            "body_force_amplitude",
-            f"the model was trained with the body force a = {scene['body_force_amplitude']:.6g} "
-            f"m/s^2 (a_z = a cos(2 pi x / lx)), the data has {data['body_force_amplitude']:.6g}: "
-            "another drive, another flow",
-        )
+    for key in ("diameter", "frame_interval"):
+        add(compare(key, float(scene[key]), float(data[key]), fail))
+    if "body_force_amplitude" in scene:
+        key = "body_force_amplitude"
+        add(compare(key, float(scene[key]), float(data[key]), fail))
     sheared = data["boundary"] == "lees_edwards"
     if sheared:
         trained = float(scene["le_sign"]) * float(scene["shear_rate"])
         given = float(data["le_sign"]) * float(data["shear_rate"])
-        if not _close(trained, given, SCENE_RTOL):
-            hint = (
-                " (opposite flow directions: mirror the data's z axis, or convert it with the "
-                "other --le-sign)"
-                if trained * given < 0
-                else ""
-            )
+        if trained * given < 0:
             raise fail(
                 "shear_rate",
                 f"the model was trained at signed shear rate {trained:+.6g} (le_sign x "
-                f"shear_rate), the data has {given:+.6g}{hint}",
+                f"shear_rate), the data has {given:+.6g} (opposite flow directions: mirror the "
+                "data's z axis, or convert it with the other --le-sign)",
             )
+        add(compare("shear_rate", trained, given, fail))
         if not _close(float(scene["le_time_origin"]), float(data["le_time_origin"]), 1e-12):
             notes.append(
                 f"LE time origin: the data's {data['le_time_origin']:.6g} is used (the model "
                 f"was trained with {scene['le_time_origin']:.6g}; offsets follow the data)"
             )
+    relative = _relative_only(hp, sheared)
+    add(
+        compare(
+            "box",
+            [float(v) for v in scene["box"]],
+            [float(v) for v in data["box"]],
+            fail,
+            beyond_ok="this model reads relative geometry only" if relative else None,
+            why=(
+                f"this model ({hp['encoding']} encoding, {hp.get('decoder_mode')} decoder, "
+                f"{data['boundary']}) depends on the box (volume fraction, drive wavelength); "
+                "only exact-frame grip models of a sheared scene are applied in any box"
+            ),
+        )
+    )
     encoder = dict(hp.get("encoder") or {})
-    box_model, box_data = np.asarray(scene["box"]), np.asarray(data["box"])
-    if np.abs(box_model - box_data).max() > BOX_RTOL * box_model.max():
-        relative_only = (
-            hp["encoding"] == "unwrapped"
-            and hp.get("decoder_mode") == "grip"
-            and sheared
-            and str(encoder.get("position_features", "auto")).lower() != "true"
-        )
-        if not relative_only:
-            raise fail(
-                "box",
-                f"the model was trained in a box {box_model.tolist()}, the data's is "
-                f"{box_data.tolist()}: this model ({hp['encoding']} encoding, "
-                f"{hp.get('decoder_mode')} decoder, {data['boundary']}) depends on the box; only "
-                "exact-frame grip models of a sheared scene are applied in another box",
-            )
-        notes.append(
-            f"box: applied in the data's box {box_data.tolist()} (trained in "
-            f"{box_model.tolist()}; the model reads relative geometry only)"
-        )
     if encoder.get("name", "graph_conv") == "graph_conv" and encoder.get("trainable_graph") == (
         "dense"
     ):

@@ -6,9 +6,10 @@ import shlex
 import numpy as np
 import pytest
 
-from gripdem.boundary import Boundary, Box, LeesEdwards, rewrap_trajectory
+from gripdem.boundary import Boundary, Box, LeesEdwards, minimum_image, rewrap_trajectory
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.formats.export import export_extxyz, export_lammps, write_lammps_dump
+from gripdem.formats.lammps import read_lammps
 
 BOX = Box(2.0, 2.5, 3.0)
 DT = 0.05
@@ -60,18 +61,26 @@ def test_extxyz_round_trip_of_true_and_predicted_trajectories(tmp_path):
     pred = read_extxyz(files["window001_pred"])
     assert len(true) == len(pred) == 6  # last observed + 5 horizon steps
     info, rows = true[3]
-    assert info["Lattice"] == "2.0 0 0 0 2.5 0 0 0 3.0"
+    delta = float(p.boundary.offset(p.times[1, 2]))
+    assert info["Lattice"] == f"2.0 0 {delta!r} 0 2.5 0 0 0 3.0"  # the LE lattice of the frame
     assert info["Origin"] == "-1.0 -1.25 -1.5" and info["pbc"] == "T T T"
     assert info["Properties"] == "species:S:1:pos:R:3:radius:R:1:id:I:1:crosser:I:1"
     assert float(info["Time"]) == pytest.approx(p.times[1, 2])
     assert float(info["le_offset"]) == pytest.approx(p.boundary.offset(p.times[1, 2]))
     positions = np.array([[float(v) for v in row[1:4]] for row in rows])
-    np.testing.assert_allclose(positions, p.true_positions[1, 2], rtol=1e-11, atol=1e-12)
+    # the same images, moved into the sheared parallelepiped the viewer draws from Origin
+    same = minimum_image(positions - p.true_positions[1, 2], BOX, delta)
+    np.testing.assert_allclose(same, 0.0, atol=1e-10)  # 12 digits written
+    inside = positions[:, 2] - (positions[:, 0] / BOX.lx + 0.5) * delta
+    assert (np.abs(positions[:, :2]) <= 0.5 * BOX.lengths[:2]).all()
+    assert (np.abs(inside) <= 0.5 * BOX.lz + 1e-10).all()
     assert {row[0] for row in rows} == {"P"} and float(rows[0][4]) == 0.05
     assert [int(row[5]) for row in rows] == list(range(1, 31))
     assert sum(int(row[6]) for row in rows) > 0  # some particles cross an x face
     first = np.array([[float(v) for v in row[1:4]] for row in pred[0][1]])
-    np.testing.assert_allclose(first, p.last_positions[1], rtol=1e-11, atol=1e-12)
+    last_offset = float(pred[0][0]["le_offset"])
+    same = minimum_image(first - p.last_positions[1], BOX, last_offset)
+    np.testing.assert_allclose(same, 0.0, atol=1e-10)
     # the prediction file carries the minimum-image distance to the truth
     info, rows = pred[4]
     assert info["Properties"].endswith(":error:R:1")
@@ -101,12 +110,14 @@ def test_extxyz_is_read_by_ase_when_available(tmp_path):
     files = export_extxyz(p, tmp_path)
     atoms = ase_io.read(files["window000_pred"], index=":")
     assert len(atoms) == 6
-    np.testing.assert_allclose(atoms[2].positions, p.pred_positions[0, 1], atol=1e-11)
-    np.testing.assert_allclose(atoms[2].cell.lengths(), BOX.lengths)
+    delta = p.boundary.offset(p.times[0, 1])
+    same = minimum_image(atoms[2].positions - p.pred_positions[0, 1], BOX, delta)
+    np.testing.assert_allclose(same, 0.0, atol=1e-11)
+    np.testing.assert_allclose(atoms[2].cell.array, [[2.0, 0, delta], [0, 2.5, 0], [0, 0, 3.0]])
     assert atoms[2].info["window"] == 0 and "error" in atoms[2].arrays
 
 
-def read_lammps(path):
+def read_orthogonal_dump(path):
     lines = path.read_text().splitlines()
     frames, i = [], 0
     while i < len(lines):
@@ -122,14 +133,27 @@ def read_lammps(path):
 
 def test_lammps_dump_round_trip(tmp_path):
     p = make_predictions()
-    files = export_lammps(p, tmp_path, window=1)
-    frames = read_lammps(files["window001_pred"])
-    assert [f[0] for f in frames] == list(range(6))
-    step, bounds, table = frames[2]
-    np.testing.assert_allclose(bounds, [[-1.0, 1.0], [-1.25, 1.25], [-1.5, 1.5]])
-    np.testing.assert_allclose(table[:, 2:5], p.pred_positions[1, 1], rtol=1e-11, atol=1e-12)
-    assert (table[:, 0] == np.arange(1, 31)).all() and (table[:, 5] == 0.05).all()
     path = write_lammps_dump(
         tmp_path / "x.dump", p.true_positions[0], BOX.lengths, 0.05, timesteps=np.arange(5) * 100
-    )
-    assert read_lammps(path)[3][0] == 300
+    )  # no offsets: an orthogonal box in gripdem's axes
+    frames = read_orthogonal_dump(path)
+    step, bounds, table = frames[3]
+    assert step == 300
+    np.testing.assert_allclose(bounds, [[-1.0, 1.0], [-1.25, 1.25], [-1.5, 1.5]])
+    np.testing.assert_allclose(table[:, 2:5], p.true_positions[0, 3], rtol=1e-11, atol=1e-12)
+    assert (table[:, 0] == np.arange(1, 31)).all() and (table[:, 5] == 0.05).all()
+
+
+def test_lees_edwards_dump_is_a_sheared_lammps_box_that_reads_back(tmp_path):
+    p = make_predictions()
+    files = export_lammps(p, tmp_path, window=1)
+    text = files["window001_pred"].read_text()
+    assert "ITEM: BOX BOUNDS xy xz yz pp pp pp" in text
+    data, report = read_lammps([files["window001_pred"]], diameter=0.1, timestep=DT)
+    assert report.axes.name == "yzx" and data.boundary.is_lees_edwards
+    assert data.boundary.lees_edwards.shear_rate == pytest.approx(2.0)
+    offsets = p.boundary.offset(np.concatenate([[p.times[1, 0] - DT], p.times[1]]))
+    np.testing.assert_allclose(data.offsets()[0], offsets, atol=1e-12)
+    expected = np.concatenate([p.last_positions[1][None], p.pred_positions[1]])
+    same = minimum_image(data.positions[0] - expected, BOX, offsets[:, None])
+    np.testing.assert_allclose(same, 0.0, atol=1e-10)  # 12 digits written

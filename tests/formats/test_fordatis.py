@@ -236,3 +236,41 @@ def test_cli_refuses_to_overwrite_and_reports_bad_input(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "p.h5: field 'Step#2/Coords_0': missing dataset" in err and "Traceback" not in err
     assert not (tmp_path / "new.h5").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# --body-force: the periodic drive recorded, checked and printed
+# --------------------------------------------------------------------------------------------
+def test_body_force_is_recorded_printed_and_checked(tmp_path, capsys):
+    pos, times, ids = make_trajectory(3, frames=8)
+    path = write_h5(tmp_path / "p.h5", pos, times, ids)
+    out = tmp_path / "driven.h5"
+    assert main(["fordatis", str(path), str(out), "--body-force", "5864.5"]) == 0
+    printed = capsys.readouterr().out
+    assert "body force: A = 5864.5 (a_z = A cos(2 pi x / lx)" in printed
+    assert "flow profile: mean z velocity = " in printed
+    data = read_dataset(out)
+    assert data.body_force_amplitude == 5864.5
+    assert data.provenance["parameters"]["body_force_amplitude"] == 5864.5
+    with h5py.File(out) as h5:
+        assert h5.attrs["body_force_amplitude"] == 5864.5
+    assert main(["fordatis", str(path), str(tmp_path / "plain.h5")]) == 0
+    assert "body force: none (give --body-force A" in capsys.readouterr().out
+    assert read_dataset(tmp_path / "plain.h5").body_force_amplitude == 0.0
+    for bad in ("-1", "nan", "inf"):
+        assert main(["fordatis", str(path), str(tmp_path / "bad.h5"), "--body-force", bad]) == 1
+        err = capsys.readouterr().err
+        assert "--body-force must be a finite acceleration >= 0" in err and bad in err
+    assert not (tmp_path / "bad.h5").exists()
+
+
+def test_body_force_on_lees_edwards_data_is_refused(tmp_path, capsys):
+    archive, _ = le_archive(tmp_path, -1)
+    out = tmp_path / "le.h5"
+    args = ["fordatis", str(archive), str(out), "--shear-rate", "1000", "--body-force", "10"]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "--shear-rate 1000.0: --body-force 10: the data is Lees-Edwards" in err
+    assert "has no body force" in err and not out.exists()
+    assert main([*args[:-1], "0"]) == 0  # 0 is no drive
+    assert "body force: none (Lees-Edwards data" in capsys.readouterr().out

@@ -329,3 +329,24 @@ def test_bad_dumps_give_clear_errors_and_write_nothing(tmp_path, capsys, kind):
         assert str(path) in err
     assert not out.exists()
     assert not list(tmp_path.glob(".out.h5*"))  # no temporary file left either
+
+
+def test_body_force_is_recorded_for_periodic_dumps_and_refused_for_sheared_ones(tmp_path, capsys):
+    positions, velocities, times, offsets = reference(sheared=False)
+    path = write(
+        tmp_path / "pbc.dump",
+        dump_variant(positions, velocities, times, offsets, ["id", "x", "y", "z"], tilted=False),
+    )
+    out = tmp_path / "pbc.h5"
+    common = ["--diameter", str(D), "--timestep", str(ENGINE_DT)]
+    assert main(["lammps", str(path), str(out), *common, "--body-force", "250"]) == 0
+    assert "body force: A = 250 (a_z = A cos(2 pi x / lx)" in capsys.readouterr().out
+    assert read_dataset(out).body_force_amplitude == 250.0
+    sheared = reference()
+    tilted = write(tmp_path / "le.dump", dump_variant(*sheared, COLUMN_VARIANTS["scaled"]))
+    le_out = tmp_path / "le.h5"
+    assert main(["lammps", str(tilted), str(le_out), *common, "--body-force", "250"]) == 1
+    err = capsys.readouterr().err
+    assert f"{tilted}: --body-force 250: the data is Lees-Edwards" in err and not le_out.exists()
+    assert main(["lammps", str(path), str(out), *common, "--body-force", "-3", "--overwrite"]) == 1
+    assert "--body-force must be a finite acceleration >= 0" in capsys.readouterr().err

@@ -65,6 +65,7 @@ __all__ = [
     "IncompatibleError",
     "check_compatible",
     "export_run_model",
+    "training_data_card",
     "load_checkpoint_model",
     "load_model",
     "read_checkpoint",
@@ -168,11 +169,30 @@ def load_checkpoint_model(checkpoint: str | os.PathLike):
     return build_module(checkpoint, hparams, state)
 
 
+def training_data_card(meta: DatasetMeta) -> dict[str, Any]:
+    """What a model card says about the training data: the file's name, its sizes and scene,
+    and its provenance (the generator and the configuration that made it, or the importer and
+    its options)."""
+    return {
+        "file": Path(meta.path).name,
+        "simulations": int(meta.n_sims),
+        "frames": int(meta.n_frames),
+        "particles": int(meta.n_particles),
+        "scene": data_scene(meta),
+        "provenance": dict(meta.provenance),
+    }
+
+
 def export_run_model(
-    model, path: str | os.PathLike, run: Mapping[str, Any], metrics: Mapping[str, Any]
+    model,
+    path: str | os.PathLike,
+    run: Mapping[str, Any],
+    metrics: Mapping[str, Any],
+    meta: DatasetMeta | None = None,
 ) -> Path:
     """Write ``model`` as a shareable model file with its card: the run's flat
-    hyperparameters ``run`` (scene, split, model, ...), the test metrics, gripdem's version."""
+    hyperparameters ``run`` (scene, split, model, ...), the test metrics, gripdem's version and
+    (given the training data's ``meta``) :func:`training_data_card`."""
     card = {
         "gripdem_version": gripdem.__version__,
         "scene": run.get("scene"),
@@ -181,6 +201,8 @@ def export_run_model(
         "run": dict(run),
         "metrics": finite_metrics(metrics),
     }
+    if meta is not None:
+        card["training_data"] = training_data_card(meta)
     return save_model_file(model, path, card, overwrite=True)
 
 

@@ -284,7 +284,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         "hp/test_rmse_cv_baseline": metrics["test/rmse_constant_velocity"],
     }
     metrics.update(hp_values)
-    export_run_model(model, out_dir / "checkpoints" / "best.safetensors", hp, metrics)
+    export_run_model(model, out_dir / "checkpoints" / "best.safetensors", hp, metrics, dm.meta)
     predictions = to_predictions(results, dm, hp)
     physics, physics_report = physics_metrics(predictions)
     metrics.update(physics)

@@ -89,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "checkpoint",
         type=Path,
-        help="a .ckpt checkpoint or a .safetensors model file (outputs/.../checkpoints/best.*)",
+        help="a .ckpt checkpoint, a .safetensors model file (outputs/.../checkpoints/best.*) "
+        "or a shipped model: pretrained:pbc, pretrained:lebc",
     )
     p.add_argument("data", type=Path, help="gripdem HDF5 dataset")
     p.add_argument("--start", type=int, default=0, metavar="FRAME", help="first observed frame")

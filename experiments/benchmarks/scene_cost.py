@@ -42,6 +42,7 @@ from gripdem.data.batch import collate_windows
 from gripdem.data.dataset import FrameReader, WindowDataset
 from gripdem.data.dataset_io import read_meta
 from gripdem.data.encodings import x_face_crossings
+from gripdem.data.frames import FrameStore
 from gripdem.data.graph import build_graph
 from gripdem.data.windows import Segment, WindowIndex
 from gripdem.dem.config import GeneratorConfig
@@ -168,6 +169,20 @@ def window_parts(model, meta, path: Path, n_windows: int) -> dict:
     dataset = WindowDataset(
         reader, meta, times, windows, model.encoding, model.normalizer, cutoff, graph_cache_mb=0
     )
+    store = FrameStore(  # the training path: the simulation kept in memory, prepared once
+        lambda s: reader.read(s, 0, meta.n_frames),
+        times,
+        meta.boundary,
+        model.normalizer,
+        cutoff,
+        meta.diameter,
+        simulation_mb=meta.n_frames * meta.n_particles * 3 * 8 / 2**20,
+    )
+    in_memory = WindowDataset(
+        reader, meta, times, windows, model.encoding, model.normalizer, cutoff,
+        graph_cache_mb=0, store=store,
+    )  # fmt: skip
+    in_memory[0]  # the one-off preparation of the simulation is not a window's cost
     offsets = meta.boundary.offset(times)
     frames = [reader.read(w.sim, w.start, w.stop).transpose(1, 0, 2) for w in windows]
     offs = [offsets[w.sim, w.start : w.stop] for w in windows]
@@ -219,6 +234,9 @@ def window_parts(model, meta, path: Path, n_windows: int) -> dict:
             ),
             "whole sample (read, encode, normalise, graph, mask)": each(
                 lambda i: collate_windows([dataset[i]])
+            ),
+            "whole sample, in-memory frames (data/frames.py; graphs not cached)": each(
+                lambda i: collate_windows([in_memory[i]])
             ),
         },
         "model": {

@@ -78,6 +78,8 @@ def test_custom_split_and_defaults():
         "interaction",
     )
     assert default.data.history_len == 10  # experiment=fast is the default preset
+    # a step budget: one simulation of the user's gets as many updates as the default six
+    assert (default.trainer.max_steps, default.trainer.max_epochs) == (1820, -1)
     # the data's graph cut-off follows the encoder (one source of truth)
     assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.3
     assert compose_run(["model=grip_paper"]).data.graph_cutoff == 3.0

@@ -12,6 +12,7 @@ geometry and motion, :mod:`gripdem.nn.interaction`; needs the exact frame).
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any
 
@@ -56,6 +57,22 @@ ENCODER_OPTIONS = {
 LR_SCHEDULES = ("constant", "cosine")
 DECODERS = ("gru", "direct")
 POSITION_FEATURES = ("auto", "true", "false")
+
+
+def encoder_options(cfg: dict[str, Any] | None) -> dict[str, Any]:
+    """The options the named encoder reads, each missing one filled with the encoder's default
+    (a model saved before an option existed compares equal to one built with its default)."""
+    cfg = dict(cfg or {})
+    name = cfg.get("name", "graph_conv")
+    if name not in ENCODER_OPTIONS:
+        return cfg
+    cls = GraphConvEncoder if name == "graph_conv" else InteractionEncoder
+    params = inspect.signature(cls.__init__).parameters
+    out: dict[str, Any] = {"name": name}
+    for key in ENCODER_OPTIONS[name]:
+        default = params[key].default if key in params else None
+        out[key] = cfg.get(key, None if default is inspect.Parameter.empty else default)
+    return out
 
 
 def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:

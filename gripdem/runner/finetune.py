@@ -18,6 +18,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from gripdem.inference.checkpoint import load_checkpoint_model
+from gripdem.models.module import encoder_options
 
 #: hyperparameters that shape the weights: they must agree between the source and the run
 ARCHITECTURE = (
@@ -45,9 +46,9 @@ def check_architecture(source_hp: dict[str, Any], run_hp: dict[str, Any], spec: 
     """Refuse a source whose weights cannot be the run's, naming the first option that differs."""
     for key in ARCHITECTURE:
         a, b = source_hp.get(key), run_hp.get(key)
-        if key == "encoder":
-            a = {k: v for k, v in (a or {}).items() if k != "position_features"}
-            b = {k: v for k, v in (b or {}).items() if k != "position_features"}
+        if key == "encoder":  # the options that shape weights, defaults filled in
+            a = {k: v for k, v in encoder_options(a).items() if k != "position_features"}
+            b = {k: v for k, v in encoder_options(b).items() if k != "position_features"}
         if a != b:
             raise ValueError(
                 f"model.init_from={spec}: the source model has {key}={a!r}, this run builds "

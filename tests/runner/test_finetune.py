@@ -13,6 +13,7 @@ from hydra import compose, initialize_config_dir
 from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.run import CONFIG_DIR
 from gripdem.runner.experiment import run_experiment
+from gripdem.runner.finetune import check_architecture
 
 
 def run(tmp_path, name, overrides):
@@ -54,3 +55,15 @@ def test_fine_tune_refuses_another_architecture(
     source = source_dir / "checkpoints" / "best.safetensors"
     with pytest.raises(ValueError, match="model.init_from=.*encoder"):
         run(tmp_path, "other", [f"model.init_from={source}", "model.encoder.channels=16"])
+
+
+def test_a_source_saved_before_an_option_existed_compares_with_its_default():
+    """The shipped models predate ``edge_updates``: their encoder lacks the key, which means the
+    encoder's default (True); a run with the default accepts them, one without refuses."""
+    encoder = {"name": "interaction", "channels": 64, "rounds": 4, "edge_history": 3}
+    source = {"encoder": dict(encoder), "horizon": 10}
+    check_architecture(source, {"encoder": {**encoder, "edge_updates": True}, "horizon": 10}, "s")
+    with pytest.raises(ValueError, match="encoder=.*edge_updates.: True"):
+        check_architecture(
+            source, {"encoder": {**encoder, "edge_updates": False}, "horizon": 10}, "s"
+        )

@@ -191,20 +191,32 @@ def tiling(factor: int) -> tuple[int, int]:
     return my, factor // my
 
 
-def tile_frames(positions: np.ndarray, box, factor: int):
-    """Frames ``(..., N, 3)`` of ``box`` tiled ``factor`` times along y and z: ``(positions
-    (..., factor * N, 3), Box)``; the same state repeated, a valid configuration of the
-    larger box (same volume fraction, same neighbourhoods)."""
-    from gripdem.boundary import Box, wrap_positions
+def tile_frames(positions: np.ndarray, box, factor: int, offsets: np.ndarray | None = None):
+    """A trajectory ``(T, N, 3)`` (or one frame ``(N, 3)``) of ``box`` tiled ``factor`` times
+    along y and z: ``(positions (T, factor * N, 3), Box)``; the same state repeated, a valid
+    configuration of the larger box (same volume fraction, same neighbourhoods). A trajectory
+    is tiled as one: its lattice-continuous form (frame 0's images) is copied and every frame
+    wrapped into the larger box with its own LE offset (``offsets`` ``(T,)``; None: periodic),
+    so a particle that crosses a y or z face keeps its small step in every copy (tiling the
+    wrapped frames one by one would turn such a crossing into a jump of a box length)."""
+    from gripdem.boundary import Box, rewrap_trajectory, unwrap_trajectory, wrap_positions
 
+    positions = np.asarray(positions, np.float64)
+    trajectory = positions.ndim == 3
+    if trajectory and offsets is not None:
+        offsets = np.asarray(offsets, np.float64)
+    source = unwrap_trajectory(positions, box, offsets) if trajectory else positions
     my, mz = tiling(factor)
     big = Box(box.lx, my * box.ly, mz * box.lz)
     copies = []
     for j in range(my):
         for k in range(mz):
             shift = np.array([0.0, (j - (my - 1) / 2) * box.ly, (k - (mz - 1) / 2) * box.lz])
-            copies.append(positions + shift)
-    return wrap_positions(np.concatenate(copies, axis=-2), big), big
+            copies.append(source + shift)
+    tiled = np.concatenate(copies, axis=-2)
+    if trajectory:
+        return rewrap_trajectory(tiled, big, offsets), big
+    return wrap_positions(tiled, big), big
 
 
 def train_run(run: Path, overrides: list[str]) -> Path:

@@ -107,7 +107,8 @@ def tiled_batch(data_path: Path, factor: int, frames: int, model, work: Path):
         sim = meta0.n_sims - 1
         pos = np.asarray(h5["positions"][sim, -frames:], np.float64)
         times = np.asarray(h5["times"][sim, -frames:], np.float64)
-    tiled, box = tile_frames(pos, meta0.box, factor)
+    offsets = meta0.boundary.offset(times) if meta0.boundary.is_lees_edwards else None
+    tiled, box = tile_frames(pos, meta0.box, factor, offsets)
     data = TrajectoryData(
         tiled[None],
         times[None],

@@ -191,32 +191,41 @@ def tiling(factor: int) -> tuple[int, int]:
     return my, factor // my
 
 
-def tile_frames(positions: np.ndarray, box, factor: int, offsets: np.ndarray | None = None):
-    """A trajectory ``(T, N, 3)`` (or one frame ``(N, 3)``) of ``box`` tiled ``factor`` times
-    along y and z: ``(positions (T, factor * N, 3), Box)``; the same state repeated, a valid
-    configuration of the larger box (same volume fraction, same neighbourhoods). A trajectory
-    is tiled as one: its lattice-continuous form (frame 0's images) is copied and every frame
-    wrapped into the larger box with its own LE offset (``offsets`` ``(T,)``; None: periodic),
-    so a particle that crosses a y or z face keeps its small step in every copy (tiling the
-    wrapped frames one by one would turn such a crossing into a jump of a box length)."""
-    from gripdem.boundary import Box, rewrap_trajectory, unwrap_trajectory, wrap_positions
+def tile_frames(positions: np.ndarray, boundary, factor: int, times: np.ndarray | None = None):
+    """A trajectory ``(T, N, 3)`` at ``times`` ``(T,)`` (or one frame ``(N, 3)``) of
+    ``boundary`` tiled ``factor`` times along y and z: ``(positions (T, factor * N, 3),
+    Boundary)``; the same state repeated, a valid configuration of the larger box (same volume
+    fraction, same neighbourhoods, the same Lees-Edwards images: the state is periodic along z
+    with the small box's length). A trajectory is tiled as one: its lattice-continuous form
+    (frame 0's images, the small box's offsets) is copied and every frame wrapped into the
+    larger box with the larger box's own offset at that time, so a particle that crosses a face
+    keeps its small step in every copy (tiling the wrapped frames one by one would turn a y or z
+    crossing into a jump of a box length, and the offsets of the small box would shift x
+    crossers by whole small-box lengths)."""
+    from gripdem.boundary import Boundary, Box, rewrap_trajectory, unwrap_trajectory
 
     positions = np.asarray(positions, np.float64)
-    trajectory = positions.ndim == 3
-    if trajectory and offsets is not None:
-        offsets = np.asarray(offsets, np.float64)
-    source = unwrap_trajectory(positions, box, offsets) if trajectory else positions
+    box = boundary.box
     my, mz = tiling(factor)
-    big = Box(box.lx, my * box.ly, mz * box.lz)
+    big = Boundary(Box(box.lx, my * box.ly, mz * box.lz), boundary.lees_edwards)
+    trajectory = positions.ndim == 3
+    le = boundary.is_lees_edwards
+    if trajectory:
+        if le and times is None:
+            raise ValueError("tile_frames: a Lees-Edwards trajectory needs its frame times")
+        small = boundary.offset(np.asarray(times, np.float64)) if le else None
+        source = unwrap_trajectory(positions, box, small)
+    else:
+        source = positions[None]
+        times = np.zeros(1) if times is None else np.atleast_1d(np.asarray(times, np.float64))
     copies = []
     for j in range(my):
         for k in range(mz):
             shift = np.array([0.0, (j - (my - 1) / 2) * box.ly, (k - (mz - 1) / 2) * box.lz])
             copies.append(source + shift)
     tiled = np.concatenate(copies, axis=-2)
-    if trajectory:
-        return rewrap_trajectory(tiled, big, offsets), big
-    return wrap_positions(tiled, big), big
+    out = rewrap_trajectory(tiled, big.box, big.offset(np.asarray(times)) if le else None)
+    return (out if trajectory else out[0]), big
 
 
 def train_run(run: Path, overrides: list[str]) -> Path:

@@ -55,7 +55,6 @@ from benchlib import (
     tile_frames,
 )
 
-from gripdem.boundary import Boundary
 from gripdem.data.batch import collate_windows
 from gripdem.data.dataset import WindowDataset
 from gripdem.data.dataset_io import read_meta, write_dataset
@@ -107,12 +106,11 @@ def tiled_batch(data_path: Path, factor: int, frames: int, model, work: Path):
         sim = meta0.n_sims - 1
         pos = np.asarray(h5["positions"][sim, -frames:], np.float64)
         times = np.asarray(h5["times"][sim, -frames:], np.float64)
-    offsets = meta0.boundary.offset(times) if meta0.boundary.is_lees_edwards else None
-    tiled, box = tile_frames(pos, meta0.box, factor, offsets)
+    tiled, boundary = tile_frames(pos, meta0.boundary, factor, times)
     data = TrajectoryData(
         tiled[None],
         times[None],
-        Boundary(box, meta0.boundary.lees_edwards),
+        boundary,
         meta0.radius,
         body_force_amplitude=meta0.body_force_amplitude,
         provenance={"generator": "bench_scaling tiling", "factor": factor},

@@ -50,7 +50,6 @@ from benchlib import (
     tile_frames,
 )
 
-from gripdem.boundary import Boundary
 from gripdem.data.dataset_io import read_meta, write_dataset
 from gripdem.data.schema import TrajectoryData
 from gripdem.dem.config import GeneratorConfig
@@ -95,10 +94,8 @@ def tiled_state(data_path: Path, sim: int, first: int, frames: int, factor: int,
         vel = np.asarray(h5["velocities"][sim, first + frames - 1], np.float64)
         times = np.asarray(h5["times"][sim, first : first + frames], np.float64)
     meta0 = read_meta(data_path)
-    offsets = meta0.boundary.offset(times) if meta0.boundary.is_lees_edwards else None
-    tiled, box = tile_frames(pos, meta0.box, factor, offsets)
+    tiled, boundary = tile_frames(pos, meta0.boundary, factor, times)
     vel_tiled = np.concatenate([vel] * factor, axis=0)  # same copy order as tile_frames
-    boundary = Boundary(box, meta0.boundary.lees_edwards)
     data = TrajectoryData(
         tiled[None],
         times[None],

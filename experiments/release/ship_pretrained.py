@@ -47,8 +47,7 @@ def markdown_card(name: str, card: dict, size_bytes: int, n_weights: int) -> str
     run, metrics, data = card["run"], card["metrics"], card["training_data"]
     params = data["provenance"].get("parameters", {})
     scene_cfg, preset = params.get("scene", {}), params.get("preset", {})
-    d = 2.0 * float(scene_cfg.get("radius", math.nan)) if "radius" in scene_cfg else math.nan
-    d = float(scene_cfg.get("diameter", d))
+    d = float(data["scene"]["diameter"])  # the training data's, as every model reads it
     lines = [
         f"# pretrained:{name}",
         "",

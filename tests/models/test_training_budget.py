@@ -7,19 +7,12 @@ import time
 
 import lightning as L
 import pytest
+from checkpoints import quiet_trainer
 from stress_models import smoke_model
 
 
 def trainer(**budget) -> L.Trainer:
-    return L.Trainer(
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        num_sanity_val_steps=0,
-        limit_val_batches=0,
-        **budget,
-    )
+    return quiet_trainer(limit_val_batches=0, **budget)
 
 
 def test_step_budget_ends_the_schedule(tiny_pbc_path):

@@ -11,9 +11,9 @@ from __future__ import annotations
 import json
 import math
 
-import lightning as L
 import pytest
 import torch
+from checkpoints import quiet_trainer
 from lightning.pytorch.callbacks import Callback
 from stress_models import (
     collate_all,
@@ -110,14 +110,9 @@ class AtStep(Callback):
 
 
 def fit(model, dm, callback=None, max_steps: int = 6):
-    trainer = L.Trainer(
+    trainer = quiet_trainer(
         max_steps=max_steps,
         limit_val_batches=0,
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        num_sanity_val_steps=0,
         gradient_clip_val=1.0,
         callbacks=[callback] if callback else [],
     )

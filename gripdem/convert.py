@@ -23,11 +23,14 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from gripdem.data.dataset_io import write_dataset
-from gripdem.formats.fordatis import DEFAULT_DIAMETER, ImportReport, read_fordatis
-from gripdem.formats.lammps import read_lammps
+# light imports only: the importers load inside run_command (a Ctrl-C or SIGTERM while they
+# load is answered in one line)
 from gripdem.runner.console import run_command
+
+if TYPE_CHECKING:
+    from gripdem.formats.fordatis import ImportReport
 
 
 def _fmt(values) -> str:
@@ -84,6 +87,9 @@ def _sign(text: str) -> int:
 
 
 def _fordatis(args: argparse.Namespace) -> int:
+    from gripdem.data.dataset_io import write_dataset
+    from gripdem.formats.fordatis import read_fordatis
+
     if args.output.exists() and not args.overwrite:
         raise FileExistsError(f"{args.output}: exists; refusing to overwrite it (pass --overwrite)")
     data, report = read_fordatis(
@@ -106,6 +112,9 @@ def _fordatis(args: argparse.Namespace) -> int:
 
 
 def _lammps(args: argparse.Namespace) -> int:
+    from gripdem.data.dataset_io import write_dataset
+    from gripdem.formats.lammps import read_lammps
+
     if len(args.files) < 2:
         raise ValueError(
             "give one or more dump files and then the output file: DUMP [DUMP ...] OUT.h5"
@@ -201,6 +210,8 @@ def _add_lammps(sub) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from gripdem.formats.fordatis import DEFAULT_DIAMETER
+
     parser = argparse.ArgumentParser(
         prog="python -m gripdem.convert",
         description="Convert trajectory data to the gripdem HDF5 format.",
@@ -260,13 +271,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return run_command(
-        f"gripdem.convert {args.format}",
-        lambda: args.run(args),
-        f"{args.output if args.format == 'fordatis' else args.files[-1]} not written (the "
-        "dataset is written under a temporary name and renamed when complete)",
-    )
+    parsed: list[argparse.Namespace] = []  # parsed inside run_command (the parser imports)
+
+    def body() -> int:
+        parsed.append(build_parser().parse_args(argv))
+        return parsed[0].run(parsed[0])
+
+    def command() -> str:
+        return "gripdem.convert" + (f" {parsed[0].format}" if parsed else "")
+
+    def not_written() -> str:
+        if not parsed:
+            return "nothing written"
+        args = parsed[0]
+        return (
+            f"{args.output if args.format == 'fordatis' else args.files[-1]} not written (the "
+            "dataset is written under a temporary name and renamed when complete)"
+        )
+
+    return run_command(command, body, not_written)
 
 
 if __name__ == "__main__":

@@ -37,17 +37,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from gripdem.data.dataset_io import read_dataset
-from gripdem.data.h5io import atomic_write_text
-from gripdem.formats.handback import (
-    State,
-    data_file_text,
-    extxyz_state_text,
-    find_value,
-    lammps_axes,
-    trajectory_dump_text,
-)
-from gripdem.formats.lammps_dump import write_dump
+# light imports only: the readers and writers load inside run_command (a Ctrl-C or SIGTERM
+# while they load is answered in one line)
 from gripdem.runner.console import run_command
 
 ATOM_STYLES = ("sphere", "atomic")
@@ -65,6 +56,18 @@ def _slice(text: str | None) -> slice:
 
 def handback(args: argparse.Namespace) -> list[str]:
     """Write the requested files; returns the lines to print."""
+    from gripdem.data.dataset_io import read_dataset
+    from gripdem.data.h5io import atomic_write_text
+    from gripdem.formats.handback import (
+        State,
+        data_file_text,
+        extxyz_state_text,
+        find_value,
+        lammps_axes,
+        trajectory_dump_text,
+    )
+    from gripdem.formats.lammps_dump import write_dump
+
     outputs = [p for p in (args.data_file, args.xyz, args.dump) if p]
     if not outputs:
         raise ValueError("nothing to write: give --data, --xyz and/or --dump")

@@ -29,10 +29,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import torch
-
-from gripdem.inference.apply import apply_checkpoint
-from gripdem.inference.rollout import OVERLAP_MARGIN
+# light imports only: torch and the model code load inside run_command (a Ctrl-C or SIGTERM
+# while they load is answered in one line)
 from gripdem.runner.console import run_command
 
 
@@ -49,6 +47,8 @@ def _outputs(args) -> tuple[Path, Path, Path]:
 
 def predict(args: argparse.Namespace) -> dict[str, Any]:
     """Run the command; returns the report written to ``REPORT.json`` (and ``_lines`` to print)."""
+    from gripdem.inference.apply import apply_checkpoint
+
     out, traj_path, report_path = _outputs(args)
     report = apply_checkpoint(args, out, traj_path, report_path)
     report["_lines"] = _summary_lines(report, report.pop("_divergence_lines"), report_path)
@@ -81,6 +81,8 @@ def _summary_lines(report: dict[str, Any], divergence: list[str], path: Path) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from gripdem.inference.rollout import OVERLAP_MARGIN
+
     p = argparse.ArgumentParser(
         prog="python -m gripdem.predict",
         description="Apply a trained model (a Lightning checkpoint of gripdem.run) to a gripdem "
@@ -128,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = build_parser()
     args = parser.parse_args(argv)
     for name in ("frames", "step", "threads"):
@@ -139,10 +141,16 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--start must be a frame index >= 0, got {args.start}")
     if not args.overlap_margin >= 0:
         parser.error(f"--overlap-margin must be >= 0, got {args.overlap_margin}")
-    if args.threads:
-        torch.set_num_threads(int(args.threads))
+    return args
 
+
+def main(argv: list[str] | None = None) -> int:
     def body() -> int:
+        args = parse_args(argv)
+        if args.threads:
+            import torch
+
+            torch.set_num_threads(int(args.threads))
         report = predict(args)
         for line in report["_lines"]:
             print(line)

@@ -20,9 +20,8 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
-from gripdem.dem.config import GeneratorConfig
-from gripdem.dem.output import ensure_scene_dataset, generate_dataset
-from gripdem.dem.validation import report_paths
+# light imports only: the DEM (numba, torch) loads inside run_hydra_command (a Ctrl-C or
+# SIGTERM while it loads is answered in one line)
 from gripdem.runner.console import run_hydra_command, single_run_errors
 
 log = logging.getLogger(__name__)
@@ -32,6 +31,10 @@ _TARGETS: list[str] = []
 
 def run(cfg: DictConfig) -> Path:
     """Generate (or find in the cache) the dataset described by ``cfg``; returns its path."""
+    from gripdem.dem.config import GeneratorConfig
+    from gripdem.dem.output import ensure_scene_dataset, generate_dataset
+    from gripdem.dem.validation import report_paths
+
     _TARGETS.append("the dataset cache" if cfg.out is None else str(cfg.out))
     if cfg.out is None:
         path = ensure_scene_dataset(

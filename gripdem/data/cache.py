@@ -5,7 +5,8 @@ Location: ``$GRIPDEM_DATA`` if set, else the user cache directory
 carries a key that hashes everything the data depends on (:func:`content_key`), so a changed
 parameter or a new generator version never reuses a stale file. A file lock (``<file>.lock``)
 makes parallel sweep jobs wait for one generation instead of racing; generators write
-atomically, so a crash or Ctrl-C leaves nothing half-written.
+atomically, so a crash or Ctrl-C leaves nothing half-written, and the temporary files a
+SIGKILL leaves behind are removed by the next job that finds the entry's lock free.
 
 The cache does not know what generates the data: :func:`cached_file` asks the caller for a
 generator (the built-in DEM's is :func:`gripdem.dem.output.ensure_scene_dataset`).
@@ -22,6 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from filelock import FileLock
+
+from gripdem.data.h5io import temporaries_of
 
 log = logging.getLogger(__name__)
 
@@ -50,9 +53,11 @@ def cached_file(path: Path, generate: Callable[[Path], Any], message: str) -> Pa
     generates the same file first makes this one wait, then find it). ``message`` is logged
     (or printed when logging is not configured) before generating."""
     if path.exists():
+        _remove_temporaries_when_idle(path)
         return path
     path.parent.mkdir(parents=True, exist_ok=True)
-    with FileLock(str(path) + ".lock"):
+    with FileLock(_lock_name(path)):
+        _remove_temporaries(path)
         if path.exists():  # another job generated it while we waited
             return path
         if log.hasHandlers():  # Hydra / Lightning configured logging
@@ -61,3 +66,26 @@ def cached_file(path: Path, generate: Callable[[Path], Any], message: str) -> Pa
             print(message, flush=True)
         generate(path)
     return path
+
+
+def _lock_name(path: Path) -> str:
+    return str(path) + ".lock"
+
+
+def _remove_temporaries(path: Path) -> None:
+    """Under the lock: temporary files of ``path`` and its companions (``<stem>.*``: the
+    report beside a dataset) are a killed generator's; every writer of them holds the lock."""
+    for stale in temporaries_of(path.parent, path.stem):
+        stale.unlink(missing_ok=True)
+        log.debug("removed %s (left by a killed generation)", stale)
+
+
+def _remove_temporaries_when_idle(path: Path) -> None:
+    """The same for an existing entry, when nobody holds its lock (else left for later)."""
+    if not temporaries_of(path.parent, path.stem):
+        return
+    try:
+        with FileLock(_lock_name(path), timeout=0):
+            _remove_temporaries(path)
+    except OSError:  # held by a generator at work (filelock's Timeout), or a read-only cache
+        pass

@@ -31,6 +31,7 @@ from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
 from gripdem.dem.packing import random_packing
 from gripdem.dem.params import GENERATOR_NAME, GENERATOR_VERSION
+from gripdem.dem.workers import die_with_parent
 
 #: an overlap above this fraction of the diameter in any step means contacts pass through each
 #: other: the step is too large for the stiffness (the refusal in GeneratorConfig covers equal
@@ -121,12 +122,25 @@ def simulate_one(
     )
 
 
-def _worker(config: GeneratorConfig, seed: np.random.SeedSequence, queue, device: str):
-    """One simulation in a worker process; reports each frame through ``queue``."""
+#: the progress queue of this worker process (set by :func:`_init_worker`)
+_PROGRESS = None
+
+
+def _init_worker(parent_pid: int, queue) -> None:
+    """First thing in each worker: die with the parent (:mod:`gripdem.dem.workers`), keep the
+    progress queue."""
+    global _PROGRESS
+    die_with_parent(parent_pid)
+    queue.cancel_join_thread()  # progress ticks unsent at exit may be dropped, never block it
+    _PROGRESS = queue
+
+
+def _worker(config: GeneratorConfig, seed: np.random.SeedSequence, device: str):
+    """One simulation in a worker process; reports each frame through the progress queue."""
 
     class _Ticker:
         def update(self, k: int) -> None:
-            queue.put(k)
+            _PROGRESS.put(k)
 
     return simulate_one(config, np.random.default_rng(seed), _Ticker(), device)
 
@@ -208,25 +222,34 @@ def generate(
 def _generate_parallel(config, seeds, n_workers, bar, device) -> list[SimulationResult]:
     # spawn: a clean interpreter per worker (no forked torch/numba thread state). The workers
     # ignore Ctrl-C (started while it is ignored, they inherit that): this process alone
-    # handles it and stops them, so no worker prints a traceback of its own.
+    # handles it (and SIGTERM) and stops them, so no worker prints a traceback of its own.
+    # A SIGKILL leaves this process no say: the workers end themselves when it is gone
+    # (gripdem.dem.workers), and progress comes through a plain queue (a Manager's server
+    # process would outlive a killed parent).
     ctx = multiprocessing.get_context("spawn")
-    with _children_ignore_sigint():
-        manager = ctx.Manager()
-    with manager:
-        queue = manager.Queue()
-        with ProcessPoolExecutor(n_workers, mp_context=ctx) as pool:
+    queue = ctx.Queue()
+    pool = ProcessPoolExecutor(
+        n_workers, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(), queue)
+    )
+    try:
+        with pool:
             with _children_ignore_sigint():
-                futures = [pool.submit(_worker, config, s, queue, device) for s in seeds]
+                futures = [pool.submit(_worker, config, s, device) for s in seeds]
             try:
                 while not all(f.done() for f in futures):
                     _drain(queue, bar, timeout=0.5)
+                results = [f.result() for f in futures]
                 _drain(queue, bar, timeout=0.0)
-                return [f.result() for f in futures]
+                bar.update(max(0, bar.total - bar.n))  # ticks still on their way
+                return results
             except BaseException:
                 for f in futures:
                     f.cancel()
                 _stop_workers(pool)
                 raise
+    finally:
+        queue.close()
+        queue.join_thread()
 
 
 @contextmanager

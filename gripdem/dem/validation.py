@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from gripdem.boundary import displacement
+from gripdem.data.h5io import atomic_path, atomic_write_text
 from gripdem.data.schema import TrajectoryData
 from gripdem.dem.neighbours import build_pairs
 
@@ -234,10 +235,11 @@ def plot_profile(report: dict[str, Any], path: Path, title: str = "") -> Path:
     ax.axhline(0.0, color="0.7", lw=0.8)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    fig.savefig(tmp, format="png")
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        with atomic_path(path, overwrite=True) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -252,10 +254,7 @@ def write_report(
 ) -> tuple[Path, Path]:
     """Write the JSON and PNG next to ``dataset_path`` (each atomically)."""
     json_path, png_path = report_paths(dataset_path)
-    json_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = json_path.with_name(f".{json_path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(report, indent=2, default=float))
-    os.replace(tmp, json_path)
+    atomic_write_text(json_path, json.dumps(report, indent=2, default=float), overwrite=True)
     if report.get("finite"):
         plot_profile(report, png_path, title)
     return json_path, png_path

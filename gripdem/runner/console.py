@@ -4,9 +4,10 @@ line, and each log line once.
 Errors (:func:`run_command`, used by every ``python -m gripdem.<command>``): bad input, a bad
 option or config, a missing or existing file end the command with one line on stderr,
 ``error: <file>: field '<field>': <found>, <expected>``, and exit status 1; a Ctrl-C ends it
-with ``interrupted: <command> ...: <what was kept or removed>`` and status 130. A traceback is
-printed only for a bug (any other exception), or always with ``GRIPDEM_TRACEBACK=1`` (also
-honoured: Hydra's own ``HYDRA_FULL_ERROR=1``).
+with ``interrupted: <command> ...: <what was kept or removed>`` and status 130; SIGTERM (a
+scheduler's or ``kill``'s stop) the same way, with status 143. A traceback is printed only for
+a bug (any other exception), or always with ``GRIPDEM_TRACEBACK=1`` (also honoured: Hydra's
+own ``HYDRA_FULL_ERROR=1``).
 
 Logging: three things made a run's output hard to read:
 
@@ -22,6 +23,7 @@ their exact message. Everything else (gripdem's own warnings included) is left a
 
 from __future__ import annotations
 
+import _thread
 import logging
 import os
 import signal
@@ -99,6 +101,8 @@ def lightning_info_muted() -> Iterator[None]:
 TRACEBACK_ENV = "GRIPDEM_TRACEBACK"
 #: exit status of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it)
 INTERRUPTED_STATUS = 130
+#: exit status of a command stopped by SIGTERM (128 + SIGTERM)
+TERMINATED_STATUS = 143
 #: exception types that document bad input in their message (file, field, found, expected);
 #: other ValueErrors / OSErrors are user errors too, but come with a hint to see where
 DOCUMENTED = (
@@ -174,19 +178,46 @@ def one_line(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
-class _Sigint:
-    """Remembers that Ctrl-C was pressed (Lightning turns it into ``sys.exit(1)``)."""
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is, as Ctrl-C raises KeyboardInterrupt: everything
+    that cleans up after a Ctrl-C (temporary files, worker processes, Lightning's graceful
+    shutdown) does so after a SIGTERM too."""
 
-    seen = False
+
+class _Sigint:
+    """Remembers which of Ctrl-C / SIGTERM stopped the command (Lightning turns either into
+    ``sys.exit(1)``)."""
+
+    seen: int | None = None
+    previous_hook = sys.__unraisablehook__
 
     @classmethod
     def handler(cls, signum, frame) -> None:
-        cls.seen = True
+        cls.seen = signum
+        if signum == signal.SIGTERM:
+            raise Terminated
         raise KeyboardInterrupt
+
+    @classmethod
+    def unraisable(cls, unraisable) -> None:
+        """``sys.unraisablehook``: the handler's exception raised where Python cannot
+        propagate it (a weakref callback, a ``__del__``: "Exception ignored in ...", measured
+        inside importlib's module locks) is delivered again, so the command still stops."""
+        if cls.seen is not None and isinstance(unraisable.exc_value, KeyboardInterrupt):
+            # from another thread, a moment later: delivered here it would land in this hook
+            again = threading.Timer(0.01, _thread.interrupt_main, args=(cls.seen,))
+            again.daemon = True
+            again.start()
+            return
+        cls.previous_hook(unraisable)
+
+
+#: (signal, the handler it must have for :func:`run_command` to take it over)
+_TAKEN_OVER = ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL))
 
 
 def run_command(
-    command: str,
+    command: str | Callable[[], str],
     body: Callable[[], int | None],
     interrupted: str | Callable[[], str] = "nothing half-written is left (files are written "
     "to a temporary name and renamed when complete)",
@@ -194,29 +225,44 @@ def run_command(
 ) -> int:
     """Run ``body`` (a command's work); returns the exit status. User errors print one line
     ``error: ...`` (status 1), Ctrl-C one line ``interrupted: ...`` (status 130) saying
-    ``interrupted`` (text, or a function called then: what was kept or removed); anything else
-    is a bug and raises (its traceback printed by Python). ``error_status``: the status of a
-    user error (``claims`` and ``summary`` keep their documented 2)."""
-    previous = None
+    ``interrupted`` (text, or a function called then: what was kept or removed), SIGTERM the
+    same line (status 143); anything else is a bug and raises (its traceback printed by
+    Python). ``error_status``: the status of a user error (``claims`` and ``summary`` keep
+    their documented 2). ``command`` may be a function too (a name that depends on what
+    ``body`` parsed): a command that parses and imports inside ``body`` answers a Ctrl-C or
+    SIGTERM within a fraction of a second of its start."""
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-            previous = signal.signal(signal.SIGINT, _Sigint.handler)
-    _Sigint.seen = False
+        for signum, default in _TAKEN_OVER:
+            if signal.getsignal(signum) is default:  # not ignored, not someone else's
+                previous[signum] = signal.signal(signum, _Sigint.handler)
+    _Sigint.seen = None
+    _Sigint.previous_hook, sys.unraisablehook = sys.unraisablehook, _Sigint.unraisable
     try:
-        status = body()
-    except KeyboardInterrupt:
-        return _interrupted(command, interrupted)
-    except SystemExit as exc:
-        if _Sigint.seen and exc.code not in (0, None):  # Lightning's graceful Ctrl-C exit
-            return _interrupted(command, interrupted)
-        raise
-    except _user_error_types() as exc:
-        report_error(exc)
-        return error_status
+        try:
+            status = body()
+        except SystemExit as exc:
+            if _Sigint.seen and exc.code not in (0, None):  # Lightning's graceful Ctrl-C exit
+                return _interrupted(command, interrupted, _Sigint.seen)
+            raise
+        except Exception as exc:
+            if not isinstance(exc, _user_error_types()):
+                raise
+            report_error(exc)
+            return error_status
+    except KeyboardInterrupt as exc:  # in the work, or while an error was being reported
+        return _interrupted(command, interrupted, _Sigint.seen or _signal_of(exc))
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = _Sigint.previous_hook
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    if _Sigint.seen is not None:  # its exception swallowed by a library: stopped all the same
+        return _interrupted(command, interrupted, _Sigint.seen)
     return 0 if status is None else int(status)
+
+
+def _signal_of(exc: KeyboardInterrupt) -> int:
+    return signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
 
 
 def run_hydra_command(
@@ -262,9 +308,13 @@ def single_run_errors() -> Iterator[None]:
         raise SystemExit(1) from None
 
 
-def _interrupted(command: str, interrupted: str | Callable[[], str]) -> int:
-    if traceback_wanted():
+def _interrupted(
+    command: str | Callable[[], str], interrupted: str | Callable[[], str], signum: int
+) -> int:
+    if traceback_wanted() and sys.exc_info()[0] is not None:
         traceback.print_exc()
     what = interrupted() if callable(interrupted) else interrupted
-    print(f"interrupted: {command} stopped by Ctrl-C; {what}", file=sys.stderr, flush=True)
-    return INTERRUPTED_STATUS
+    command = command() if callable(command) else command
+    by = "SIGTERM" if signum == signal.SIGTERM else "Ctrl-C"
+    print(f"interrupted: {command} stopped by {by}; {what}", file=sys.stderr, flush=True)
+    return TERMINATED_STATUS if signum == signal.SIGTERM else INTERRUPTED_STATUS

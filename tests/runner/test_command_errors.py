@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+import weakref
 from pathlib import Path
 
 import h5py
@@ -21,7 +22,12 @@ import pytest
 
 from gripdem.data.dataset_io import write_dataset
 from gripdem.data.schema import DatasetError
-from gripdem.runner.console import INTERRUPTED_STATUS, one_line, run_command
+from gripdem.runner.console import (
+    INTERRUPTED_STATUS,
+    TERMINATED_STATUS,
+    one_line,
+    run_command,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -62,6 +68,49 @@ def test_library_errors_get_a_hint_and_ctrl_c_one_line(monkeypatch):
     status, err = _stderr_of(lambda: run_command("gripdem.x", interrupted, "nothing written"))
     assert status == INTERRUPTED_STATUS
     assert err == "interrupted: gripdem.x stopped by Ctrl-C; nothing written\n"
+
+
+def test_a_signal_python_cannot_raise_where_it_lands_still_stops_the_command(monkeypatch):
+    """A weakref callback (importlib's module locks have them) swallows the handler's
+    exception ("Exception ignored in ..."): it is delivered again, the command stops there."""
+    monkeypatch.delenv("GRIPDEM_TRACEBACK", raising=False)
+    done = []
+
+    def body():
+        class Thing:
+            pass
+
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: (os.kill(os.getpid(), signal.SIGTERM), time.sleep(1)))
+        del thing  # the callback runs, the signal lands inside it
+        for _ in range(100):
+            time.sleep(0.01)
+        done.append(ref)
+
+    status, err = _stderr_of(lambda: run_command("gripdem.x", body, "nothing written"))
+    assert status == TERMINATED_STATUS and done == []
+    assert err == "interrupted: gripdem.x stopped by SIGTERM; nothing written\n"
+
+
+def test_sigterm_is_answered_as_ctrl_c(monkeypatch):
+    """SIGTERM raises where the command is (a KeyboardInterrupt: every Ctrl-C cleanup runs),
+    ends in the same one line and status 143; the handlers are given back afterwards."""
+    monkeypatch.delenv("GRIPDEM_TRACEBACK", raising=False)
+    cleaned = []
+
+    def terminated():
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)
+        except KeyboardInterrupt:
+            cleaned.append(True)
+            raise
+
+    before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    status, err = _stderr_of(lambda: run_command("gripdem.x", terminated, "nothing written"))
+    assert status == TERMINATED_STATUS and cleaned == [True]
+    assert err == "interrupted: gripdem.x stopped by SIGTERM; nothing written\n"
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
 
 
 def test_one_line_keeps_a_key_error_readable():
@@ -155,7 +204,7 @@ def test_ctrl_c_during_generation_is_one_line_and_leaves_nothing(tmp_path):
     out = tmp_path / "scene.h5"
     proc = subprocess.Popen(
         [sys.executable, "-m", "gripdem.simulate", "scene=pbc", "preset=tiny", f"out={out}"]
-        + ["workers=2", "progress=false", f"hydra.run.dir={tmp_path / 'h'}"],
+        + ["workers=2", "preset.frames=600", "progress=false", f"hydra.run.dir={tmp_path / 'h'}"],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -163,7 +212,7 @@ def test_ctrl_c_during_generation_is_one_line_and_leaves_nothing(tmp_path):
         start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
-    time.sleep(12)  # imports done, workers simulating
+    time.sleep(12)  # imports done, workers simulating (for about 30 s more)
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == INTERRUPTED_STATUS, err

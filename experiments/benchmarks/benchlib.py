@@ -83,6 +83,16 @@ def markdown_table(headers: list[str], rows: list[list]) -> str:
     return "\n".join(out)
 
 
+def write_report(stem: str | Path, text: str, data) -> None:
+    """``STEM.md`` (the printed report) and ``STEM.json`` (its data), then print the report."""
+    import json
+
+    stem = Path(stem)
+    stem.with_suffix(".md").write_text(text)
+    stem.with_suffix(".json").write_text(json.dumps(data, indent=1, default=str))
+    print(text)
+
+
 def fmt(value: float, digits: int = 3) -> str:
     """A number for a table: ``digits`` significant digits, '–' for None/nan."""
     if value is None or (isinstance(value, float) and not np.isfinite(value)):

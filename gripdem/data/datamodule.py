@@ -23,6 +23,7 @@ from typing import Any
 import h5py
 import lightning as L
 import numpy as np
+import torch
 from torch.utils.data import DataLoader
 
 from gripdem.data.batch import WindowBatch, collate_windows
@@ -33,6 +34,7 @@ from gripdem.data.frames import FrameStore
 from gripdem.data.graph import DEFAULT_ALPHA
 from gripdem.data.normalizer import Normalizer
 from gripdem.data.protocols import PARTS, WindowPlan, plan_windows
+from gripdem.data.resumable import ResumableLoader
 from gripdem.data.schema import DatasetError, DatasetMeta
 from gripdem.data.windows import Split
 
@@ -60,6 +62,8 @@ class TrajectoryDataModule(L.LightningDataModule):
     ``model_horizon`` (``model.horizon``): a model that predicts fewer frames than the split's
     horizon trains and validates on windows of its own horizon; the test windows keep the
     split's, and the runner chains the model over them (:mod:`gripdem.runner.chained_test`).
+    ``seed`` (the run's seed; None: ``torch.initial_seed()``) orders the training windows: one
+    permutation per ``(seed, epoch)``, resumable mid-epoch (:mod:`gripdem.data.resumable`).
     """
 
     def __init__(
@@ -85,6 +89,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         num_workers: int = 0,
         pin_memory: bool = False,
         expect_boundary: str | None = None,
+        seed: int | None = None,
     ):
         super().__init__()
         if path is None:
@@ -128,6 +133,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.num_workers = int(num_workers)
         self.pin_memory = bool(pin_memory)
         self.expect_boundary = expect_boundary
+        self.seed = seed
         self.meta: DatasetMeta | None = None
         self.plan: WindowPlan | None = None
         self.encoding: Encoding | None = None
@@ -246,15 +252,17 @@ class TrajectoryDataModule(L.LightningDataModule):
     def _loader(self, part: str, shuffle: bool) -> DataLoader:
         if not self.datasets:
             raise RuntimeError("call setup() before asking for a dataloader")
-        return DataLoader(
-            self.datasets[part],
+        options = dict(
             batch_size=self.batch_size,
-            shuffle=shuffle,
             num_workers=self.num_workers,
             collate_fn=collate_windows,
             pin_memory=self.pin_memory,
             persistent_workers=self.num_workers > 0,
         )
+        if shuffle:  # a permutation per (seed, epoch), resumable mid-epoch
+            seed = torch.initial_seed() if self.seed is None else self.seed
+            return ResumableLoader(self.datasets[part], seed=int(seed), **options)
+        return DataLoader(self.datasets[part], shuffle=False, **options)
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", shuffle=True)

@@ -160,6 +160,14 @@ class DataSchema:
 
 
 @dataclass
+class FinetuneSchema:
+    # optimiser settings of a run with model.init_from (null: the model's own)
+    lr: Optional[float] = None
+    warmup_fraction: Optional[float] = None
+    max_steps: Optional[int] = None
+
+
+@dataclass
 class OutputsSchema:
     predictions: bool = True
     figures: bool = True
@@ -182,6 +190,7 @@ class ConfigSchema:
     torch_threads: Optional[int] = None
     data_seed: int = 0
     resume: bool = False
+    finetune: FinetuneSchema = field(default_factory=FinetuneSchema)
     optimized_metric: str = "val/rmse_best"
     outputs: OutputsSchema = field(default_factory=OutputsSchema)
 

@@ -25,12 +25,11 @@ import lightning as L
 import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.loggers import TensorBoardLogger
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
 from gripdem.dem.output import ensure_scene_dataset
-from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.inference.checkpoint import (
     data_scene,
     export_run_model,
@@ -40,21 +39,23 @@ from gripdem.inference.checkpoint import (
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
+from gripdem.runner.atomic_files import AtomicCheckpointIO, AtomicTensorBoardLogger
 from gripdem.runner.chained_test import chained_test
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import lightning_info_muted, quiet_console
-from gripdem.runner.finetune import initialise, load_source
+from gripdem.runner.finetune import (
+    apply_finetune_defaults,
+    initialise,
+    keep_start_unless_beaten,
+    load_source,
+    validate_start,
+)
+from gripdem.runner.outputs import physics_metrics, plain, to_predictions, write_outputs
+from gripdem.runner.resume import ResumeCheckpoint, resumed_seconds
 
 log = logging.getLogger(__name__)
 
 HP_METRICS = ("hp/val_rmse_best", "hp/test_rmse", "hp/test_rmse_cv_baseline")
-
-
-def plain(node: Any) -> Any:
-    """A config node as plain Python values (enums as their names)."""
-    if isinstance(node, DictConfig):
-        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
-    return node
 
 
 def resolve_data_path(cfg: DictConfig) -> Path:
@@ -71,7 +72,9 @@ def resolve_data_path(cfg: DictConfig) -> Path:
 
 
 def build_datamodule(cfg: DictConfig, path: Path) -> TrajectoryDataModule:
-    dm = TrajectoryDataModule.from_config(plain(cfg.data), plain(cfg.split), path=str(path))
+    dm = TrajectoryDataModule.from_config(
+        plain(cfg.data), plain(cfg.split), path=str(path), seed=int(cfg.seed)
+    )
     dm.setup("fit")
     return dm
 
@@ -87,6 +90,11 @@ def fit_linear_ar(cfg: DictConfig, dm: TrajectoryDataModule) -> LinearAR:
             f"(history_len {dm.plan.history_len})"
         )
     return fit_on_training_frames(dm, lags, float(cfg.baselines.ar_ridge))
+
+
+def accelerator(cfg: DictConfig) -> str:
+    """The accelerator of one-process evaluation (validation of a start, the test)."""
+    return cfg.trainer.accelerator if cfg.trainer.get("strategy") is None else "cpu"
 
 
 def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
@@ -162,40 +170,31 @@ def build_trainer(cfg: DictConfig, out_dir: Path, logger: TensorBoardLogger) -> 
             filename="best",
             monitor=ckpt.get("monitor", "val/rmse"),
             mode=ckpt.get("mode", "min"),
-            save_last=ckpt.get("save_last", True),
+            save_last=False,  # last.ckpt: ResumeCheckpoint (after this one: it holds the best)
             save_top_k=ckpt.get("save_top_k", 1),
+            save_on_train_epoch_end=False,  # at validations: before ResumeCheckpoint's save
+            enable_version_counter=ckpt.get("save_top_k", 1) != 1,  # one best.ckpt, resumed too
         )
     ]
+    if ckpt.get("save_last", True):
+        every = ckpt.get("every_n_train_steps", 100)
+        callbacks.append(ResumeCheckpoint(out_dir / "checkpoints", every))
     early = callbacks_cfg.get("early_stopping", {})
     if early.get("enabled", False):
         callbacks.append(
-            EarlyStopping(monitor=early["monitor"], mode=early["mode"], patience=early["patience"])
+            EarlyStopping(
+                monitor=early["monitor"],
+                mode=early["mode"],
+                patience=early["patience"],
+                check_on_train_epoch_end=False,  # at validations, as the checkpoints
+            )
         )
     return L.Trainer(
         **plain(cfg.trainer),
         logger=logger,
         callbacks=callbacks,
         default_root_dir=str(out_dir),
-    )
-
-
-def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict) -> Predictions:
-    meta = dm.meta
-    return Predictions(
-        pred_positions=results["pred"].numpy(),
-        true_positions=results["true"].numpy(),
-        last_positions=results["last"].numpy(),
-        times=results["times"].numpy(),
-        boundary=meta.boundary,
-        radius=meta.radius,
-        frame_interval=meta.frame_interval,
-        in_sample=bool(dm.in_sample),
-        protocol=str(dm.plan.protocol),
-        sim_index=results["sim_index"].numpy(),
-        window_start=results["window_start"].numpy(),
-        baselines={name: results[name].numpy() for name in BASELINES},
-        body_force_amplitude=meta.body_force_amplitude,
-        info=info,
+        plugins=[AtomicCheckpointIO()],  # checkpoints renamed into place when complete
     )
 
 
@@ -206,7 +205,10 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
     model = metrics.get("test/rmse", math.nan)
     names = [("model", "test/rmse")]
     if "before/test/rmse" in metrics:  # fine-tuned: the source model as it was, same windows
-        names = [("model (fine-tuned)", "test/rmse"), ("before fine-tuning", "before/test/rmse")]
+        tuned = "model (fine-tuned)"
+        if metrics.get("finetune/kept_start"):
+            tuned = "model (the start: training did not beat it on validation)"
+        names = [(tuned, "test/rmse"), ("before fine-tuning", "before/test/rmse")]
     for name, key in names + [(b, f"test/rmse_{b}") for b in BASELINES]:
         value = metrics.get(key, math.nan)
         rows.append(f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} |")
@@ -237,10 +239,12 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         dm.load_state_dict(
             {"normalizer": source.normalizer.to_dict(), "encoding": dm.encoding_name}
         )
+    apply_finetune_defaults(cfg)  # fine-tuning: its own learning rate and warm-up
     model = build_model(cfg, dm)
     if source is not None:
         initialise(model, source, str(cfg.model.init_from))
-    logger = TensorBoardLogger(**plain(cfg.logger))
+        start = validate_start(model, dm, accelerator(cfg))  # the score training must beat
+    logger = AtomicTensorBoardLogger(**plain(cfg.logger))
     hp = hparams(cfg, dm)
     logger.log_hyperparams(hp, metrics={key: math.nan for key in HP_METRICS})
     trainer = build_trainer(cfg, out_dir, logger)
@@ -250,7 +254,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         log.warning("resume=true but %s does not exist: starting from scratch", resume)
     started = time.perf_counter()
     trainer.fit(model, dm, ckpt_path=ckpt_path, weights_only=True)  # never unpickle code
-    train_seconds = time.perf_counter() - started
+    train_seconds = time.perf_counter() - started + resumed_seconds(trainer)
     if not trainer.is_global_zero:
         return {}
     if torch.distributed.is_available() and torch.distributed.is_initialized():
@@ -258,7 +262,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     best = trainer.checkpoint_callback.best_model_path or None
     with lightning_info_muted():  # the fit's Trainer has said which devices there are
         test_trainer = L.Trainer(
-            accelerator=cfg.trainer.accelerator if cfg.trainer.get("strategy") is None else "cpu",
+            accelerator=accelerator(cfg),
             devices=1,
             logger=logger,
             enable_progress_bar=False,
@@ -266,13 +270,24 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         )
     if best:  # the best validation rollout, not the last epoch
         model = load_checkpoint_model(best)
+    best_score = trainer.checkpoint_callback.best_model_score
+    trained_metrics = None
+    if source is not None:  # fine-tuning never returns a model worse than its start
+        kept = keep_start_unless_beaten(model, start, best_score)
+        if kept[1]:  # what training reached, for the record, before the start replaces it
+            trained_metrics = test_model(model, dm, test_trainer, None, 0)["metrics"]
+            best, best_score = f"{cfg.model.init_from} (the starting model)", start.val_rmse
+        model, kept_start = kept
     results = test_model(model, dm, test_trainer, logger, trainer.global_step)
     metrics = dict(results["metrics"])
+    if trained_metrics is not None:
+        metrics["finetune/trained_test_rmse"] = trained_metrics["test/rmse"]
     if source is not None:  # the source model as it was, on the same test windows
         as_is = load_model(cfg.model.init_from, dm.meta)  # its own AR prior, the data's scene
         before = test_model(as_is, dm, test_trainer, None, 0)
         metrics.update({f"before/{k}": v for k, v in before["metrics"].items()})
-    best_score = trainer.checkpoint_callback.best_model_score
+        metrics["finetune/start_val_rmse"] = start.val_rmse
+        metrics["finetune/kept_start"] = float(kept_start)
     metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
     metrics["train_seconds"] = train_seconds
     trained = trainer.lightning_module
@@ -316,45 +331,3 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     print(result_table(metrics, dm.meta.diameter, dm.in_sample))
     print(f"outputs: {out_dir}\n")
     return report
-
-
-def physics_metrics(predictions: Predictions) -> tuple[dict[str, float], Any]:
-    """The physics report of the test windows (truth, model and every baseline side by side,
-    :mod:`gripdem.evaluation.physics_report`) as ``test/physics/<set>/<name>`` and, in an LE box,
-    ``test/crossers/...`` (RMSE of the crossers with a bootstrap interval); and the report."""
-    from gripdem.evaluation.physics_report import physics_report
-
-    report = physics_report(predictions)
-    out = {}
-    for key, value in report.metrics.items():
-        prefix = "test/" if key.startswith("crossers/") else "test/physics/"
-        out[prefix + key] = float(value)
-    return out, report
-
-
-def write_outputs(
-    cfg, out_dir: Path, predictions: Predictions, logger, step: int, physics_report=None
-) -> None:
-    """predictions.h5, figures (PNG + TensorBoard images; the physics figure from the report)
-    and XYZ trajectories."""
-    outputs = plain(cfg.outputs)
-    if outputs["predictions"]:
-        write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
-    if outputs["figures"]:
-        from gripdem.evaluation.figure_data import run_figure_data
-        from gripdem.plots.run import make_run_figures
-
-        make_run_figures(
-            run_figure_data(predictions),
-            out_dir / "figures",
-            writer=logger.experiment,
-            step=step,
-            physics=physics_report,
-        )
-    if outputs["export_xyz"]:
-        from gripdem.formats.export import export_extxyz
-
-        count = outputs["export_windows"]
-        n = predictions.n_windows if count is None else min(count, predictions.n_windows)
-        windows = list(range(n))
-        export_extxyz(predictions, out_dir / "trajectories", windows=windows, overwrite=True)

@@ -9,16 +9,30 @@ refitted) and starts from its weights; the linear AR baseline (and with it the A
 forecast) is fitted on the new data as in any run. Before training, the source model as it is is
 tested on the same test windows, so the result table shows the model before and after
 fine-tuning beside the baselines.
+
+Fine-tuning never loses what it started from: the source model, as initialised, is validated
+before the first step (:func:`validate_start`), and after training it stays the run's model
+unless training beat it on the validation windows (:func:`keep_start_unless_beaten`). Fine-tuning
+has its own optimiser defaults (``finetune.lr``, ``finetune.warmup_fraction`` in
+``conf/config.yaml``: a lower learning rate and a longer warm-up than training from scratch;
+:func:`apply_finetune_defaults`), chosen from the comparison in
+``experiments/results/finetune_defaults.md``.
 """
 
 from __future__ import annotations
 
+import copy
+import logging
+import math
 from typing import Any
 
-from omegaconf import DictConfig
+import lightning as L
+from omegaconf import DictConfig, open_dict
 
 from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.models.module import encoder_options
+
+log = logging.getLogger(__name__)
 
 #: hyperparameters that shape the weights: they must agree between the source and the run
 ARCHITECTURE = (
@@ -61,3 +75,60 @@ def initialise(model, source, spec: str) -> None:
     """Copy the source's weights into the run's freshly built model (strict)."""
     check_architecture(dict(source.hparams), dict(model.hparams), spec)
     model.load_state_dict(source.state_dict(), strict=True)
+
+
+def apply_finetune_defaults(cfg: DictConfig) -> None:
+    """A run with ``model.init_from`` trains with ``finetune.lr``, ``finetune.warmup_fraction``
+    and ``finetune.max_steps`` (each unless null) in place of the model's own ``lr`` and
+    ``warmup_fraction`` and the trainer's ``max_steps``: weights that
+    already fit a scene are nudged, not retrained (measured: the from-scratch learning rate made
+    the shipped model worse on scenes unlike its own, experiments/results/finetune_defaults.md)."""
+    if cfg.model.get("init_from") in (None, "") or cfg.get("finetune") is None:
+        return
+    with open_dict(cfg):
+        for key in ("lr", "warmup_fraction"):
+            value = cfg.finetune.get(key)
+            if value is not None:
+                cfg.model[key] = float(value)
+        if cfg.finetune.get("max_steps") is not None:
+            cfg.trainer.max_steps = int(cfg.finetune.max_steps)
+
+
+class StartingPoint:
+    """The source model as the run initialised it: its weights and its validation RMSE."""
+
+    def __init__(self, model, val_rmse: float):
+        self.model = model
+        self.val_rmse = val_rmse
+
+
+def validate_start(model, dm, accelerator: str = "cpu") -> StartingPoint:
+    """Validate the initialised model on the run's validation windows before the first step
+    (the metric the best checkpoint is chosen on) and keep a copy of it."""
+    trainer = L.Trainer(
+        accelerator=accelerator,
+        devices=1,
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+    )
+    results = trainer.validate(model, dm, verbose=False)
+    score = float(results[0]["val/rmse"]) if results and "val/rmse" in results[0] else math.nan
+    log.info("fine-tuning starts from val/rmse %.6g (the model as it is)", score)
+    return StartingPoint(copy.deepcopy(model), score)
+
+
+def keep_start_unless_beaten(trained, start: StartingPoint, best_score: float | None):
+    """``(model, kept_start)``: the trained model if its best validation RMSE is below the
+    starting model's, else the starting model (a tie keeps the start: nothing was gained)."""
+    best = math.nan if best_score is None else float(best_score)
+    if math.isnan(start.val_rmse) or (not math.isnan(best) and best < start.val_rmse):
+        return trained, False
+    log.warning(
+        "fine-tuning did not beat the starting model on validation (best val/rmse %.6g, "
+        "start %.6g): the run keeps the starting model",
+        best,
+        start.val_rmse,
+    )
+    return start.model, True

@@ -13,7 +13,12 @@ from hydra import compose, initialize_config_dir
 from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.run import CONFIG_DIR
 from gripdem.runner.experiment import run_experiment
-from gripdem.runner.finetune import check_architecture
+from gripdem.runner.finetune import (
+    StartingPoint,
+    apply_finetune_defaults,
+    check_architecture,
+    keep_start_unless_beaten,
+)
 
 
 def run(tmp_path, name, overrides):
@@ -25,12 +30,17 @@ def run(tmp_path, name, overrides):
     return out, run_experiment(cfg, out)
 
 
-def test_fine_tune_from_a_model_file(
-    tmp_path, monkeypatch, gripdem_data_root, tiny_pbc_path, capsys
-):
+@pytest.fixture(scope="module")
+def source(tmp_path_factory, gripdem_data_root, tiny_pbc_path):
+    """A source model file: one epoch of the smoke run (trained once for this module)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
+        out, _ = run(tmp_path_factory.mktemp("finetune"), "source", ["trainer.max_epochs=1"])
+    return out / "checkpoints" / "best.safetensors"
+
+
+def test_fine_tune_from_a_model_file(tmp_path, monkeypatch, gripdem_data_root, source, capsys):
     monkeypatch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
-    source_dir, _ = run(tmp_path, "source", ["trainer.max_epochs=1"])
-    source = source_dir / "checkpoints" / "best.safetensors"
     capsys.readouterr()
     out, report = run(tmp_path, "tuned", [f"model.init_from={source}", "data_seed=0"])
     printed = capsys.readouterr().out
@@ -47,12 +57,8 @@ def test_fine_tune_from_a_model_file(
     assert any(changed)  # and it trained from there
 
 
-def test_fine_tune_refuses_another_architecture(
-    tmp_path, monkeypatch, gripdem_data_root, tiny_pbc_path
-):
+def test_fine_tune_refuses_another_architecture(tmp_path, monkeypatch, gripdem_data_root, source):
     monkeypatch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
-    source_dir, _ = run(tmp_path, "source", ["trainer.max_epochs=1"])
-    source = source_dir / "checkpoints" / "best.safetensors"
     with pytest.raises(ValueError, match="model.init_from=.*encoder"):
         run(tmp_path, "other", [f"model.init_from={source}", "model.encoder.channels=16"])
 
@@ -67,3 +73,41 @@ def test_a_source_saved_before_an_option_existed_compares_with_its_default():
         check_architecture(
             source, {"encoder": {**encoder, "edge_updates": False}, "horizon": 10}, "s"
         )
+
+
+def test_fine_tuning_that_cannot_beat_the_start_returns_the_start(
+    tmp_path, monkeypatch, gripdem_data_root, source, capsys
+):
+    """A learning rate of 0 cannot improve on the starting model: the run validates the start
+    before its first step, keeps it, says so, and its model file holds the source's weights."""
+    monkeypatch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
+    capsys.readouterr()
+    out, report = run(tmp_path, "frozen", [f"model.init_from={source}", "finetune.lr=0"])
+    assert report["finetune/kept_start"] == 1.0
+    assert report["val/rmse_best"] == report["finetune/start_val_rmse"]
+    assert "the start: training did not beat it on validation" in capsys.readouterr().out
+    kept = load_checkpoint_model(out / "checkpoints" / "best.safetensors")
+    original = load_checkpoint_model(source)
+    for (name, a), b in zip(kept.state_dict().items(), original.state_dict().values(), strict=True):
+        assert torch.equal(a, b), name
+
+
+def test_the_start_is_kept_unless_training_beats_it_on_validation():
+    start = StartingPoint(model="start", val_rmse=2.0)
+    assert keep_start_unless_beaten("trained", start, 1.9) == ("trained", False)
+    assert keep_start_unless_beaten("trained", start, 2.0) == ("start", True)  # a tie gains nothing
+    assert keep_start_unless_beaten("trained", start, 2.1) == ("start", True)
+    assert keep_start_unless_beaten("trained", start, None) == ("start", True)  # never validated
+    unvalidated = StartingPoint(model="start", val_rmse=math.nan)
+    assert keep_start_unless_beaten("trained", unvalidated, 2.1) == ("trained", False)
+
+
+def test_fine_tuning_uses_its_own_optimiser_defaults():
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=["model.init_from=pretrained:pbc"])
+        scratch = compose("config")
+    apply_finetune_defaults(cfg)
+    apply_finetune_defaults(scratch)
+    assert cfg.model.lr == cfg.finetune.lr < scratch.model.lr
+    assert cfg.model.warmup_fraction == cfg.finetune.warmup_fraction
+    assert scratch.model.lr == 2.0e-3  # a run from scratch keeps the preset's

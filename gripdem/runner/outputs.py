@@ -1,0 +1,82 @@
+"""What a run writes after its test: the predictions file, the physics report's metrics,
+figures (PNG and TensorBoard images) and XYZ trajectories."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from gripdem.data.datamodule import TrajectoryDataModule
+from gripdem.evaluation.predictions import Predictions, write_predictions
+from gripdem.models.baselines import BASELINES
+
+
+def plain(node: Any) -> Any:
+    """A config node as plain Python values (enums as their names)."""
+    if isinstance(node, DictConfig):
+        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
+    return node
+
+
+def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict) -> Predictions:
+    meta = dm.meta
+    return Predictions(
+        pred_positions=results["pred"].numpy(),
+        true_positions=results["true"].numpy(),
+        last_positions=results["last"].numpy(),
+        times=results["times"].numpy(),
+        boundary=meta.boundary,
+        radius=meta.radius,
+        frame_interval=meta.frame_interval,
+        in_sample=bool(dm.in_sample),
+        protocol=str(dm.plan.protocol),
+        sim_index=results["sim_index"].numpy(),
+        window_start=results["window_start"].numpy(),
+        baselines={name: results[name].numpy() for name in BASELINES},
+        body_force_amplitude=meta.body_force_amplitude,
+        info=info,
+    )
+
+
+def physics_metrics(predictions: Predictions) -> tuple[dict[str, float], Any]:
+    """The physics report of the test windows (truth, model and every baseline side by side,
+    :mod:`gripdem.evaluation.physics_report`) as ``test/physics/<set>/<name>`` and, in an LE box,
+    ``test/crossers/...`` (RMSE of the crossers with a bootstrap interval); and the report."""
+    from gripdem.evaluation.physics_report import physics_report
+
+    report = physics_report(predictions)
+    out = {}
+    for key, value in report.metrics.items():
+        prefix = "test/" if key.startswith("crossers/") else "test/physics/"
+        out[prefix + key] = float(value)
+    return out, report
+
+
+def write_outputs(
+    cfg, out_dir: Path, predictions: Predictions, logger, step: int, physics_report=None
+) -> None:
+    """predictions.h5, figures (PNG + TensorBoard images; the physics figure from the report)
+    and XYZ trajectories."""
+    outputs = plain(cfg.outputs)
+    if outputs["predictions"]:
+        write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
+    if outputs["figures"]:
+        from gripdem.evaluation.figure_data import run_figure_data
+        from gripdem.plots.run import make_run_figures
+
+        make_run_figures(
+            run_figure_data(predictions),
+            out_dir / "figures",
+            writer=logger.experiment,
+            step=step,
+            physics=physics_report,
+        )
+    if outputs["export_xyz"]:
+        from gripdem.formats.export import export_extxyz
+
+        count = outputs["export_windows"]
+        n = predictions.n_windows if count is None else min(count, predictions.n_windows)
+        windows = list(range(n))
+        export_extxyz(predictions, out_dir / "trajectories", windows=windows, overwrite=True)

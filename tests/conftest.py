@@ -32,9 +32,11 @@ from gripdem.dem.output import ensure_scene_dataset
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
-# One intra-op thread: the tests' tensors are small, and on a loaded 2-core machine torch's
-# OpenMP threads spin against each other (measured here: a tiny training step 100x slower).
-torch.set_num_threads(1)
+# One intra-op thread by default: the tests' tensors are small, and on a loaded 2-core machine
+# torch's OpenMP threads spin against each other (measured here: a tiny training step 100x
+# slower). GRIPDEM_TEST_THREADS sets another count: experiments/analyses/threshold_spread.py runs
+# the suite with 1 and 2 threads to check that no threshold depends on it.
+torch.set_num_threads(int(os.environ.get("GRIPDEM_TEST_THREADS", "1")))
 
 DIAMETER = 2.5e-6
 BOX = Box(8 * DIAMETER, 7 * DIAMETER, 9 * DIAMETER)  # never cubic
@@ -97,9 +99,37 @@ def compose_simulate_config():
 
 
 @pytest.fixture(scope="session")
-def gripdem_data_root(tmp_path_factory) -> Path:
-    """Session cache directory for generated datasets."""
-    return tmp_path_factory.mktemp("gripdem-data")
+def gripdem_data_root(tmp_path_factory, worker_id) -> Path:
+    """Session cache directory for generated datasets. Under pytest-xdist every worker uses
+    the same one (in the parent of the workers' temporary folders): the dataset cache's file
+    lock lets the first worker generate the tiny scenes while the others wait, so they are
+    generated once per test run, not once per worker."""
+    if worker_id == "master":
+        return tmp_path_factory.mktemp("gripdem-data")
+    shared = tmp_path_factory.getbasetemp().parent / "gripdem-data"
+    shared.mkdir(exist_ok=True)
+    return shared
+
+
+@pytest.fixture(scope="session")
+def worker_id(request) -> str:
+    """pytest-xdist's worker name ("gw0", ...), or "master" without xdist."""
+    workerinput = getattr(request.config, "workerinput", None)
+    return workerinput["workerid"] if workerinput else "master"
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Tests marked ``first`` (the longest, each a minute or so) start before the others, so
+    that under pytest-xdist they do not form the tail of the run on one worker."""
+    items.sort(key=lambda item: item.get_closest_marker("first") is None)  # stable
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_auto_num_workers(config) -> int:
+    """``-n auto``: one worker per available core, at most 4 (each worker holds its own torch,
+    numba and datasets: about 1 GB), and no more than the tests need."""
+    available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(4, available or 1))
 
 
 def _tiny_dataset(scene: str, root: Path) -> Path:

@@ -113,15 +113,29 @@ def test_gradients_reach_every_parameter(tiny_lebc_path, mode, encoding, shift, 
     assert missing == []
 
 
+#: fold asked of 200 steps. Measured folds (lowest of the last 20 losses), over every mode,
+#: ATEN_CPU_CAPABILITY=default|avx2|avx512 and 1|2 threads: 12.3-12.6 (vct, exact frame),
+#: 25.4-32.0 (the other exact-frame modes), 28.1-58.5 (sin/cos and VCT channels); see
+#: experiments/results/threshold_spread.md. 5 leaves more than twice the smallest.
+OVERFIT_FOLD = 5.0
+
+
+@pytest.mark.numerics
 @pytest.mark.parametrize(("mode", "encoding", "shift", "encoder"), MODES)
 def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
-    """Learning works: 200 Adam steps on one window cut the loss at least 20-fold (10-fold in
-    the exact frame, whose loss starts at constant velocity's and measures what CV misses)."""
+    """Learning works: 200 Adam steps on one fixed window cut the loss several-fold.
+
+    The fold reached moves with the CPU's vector unit and the thread count (Adam at lr 1e-2
+    oscillates near its floor), so the test reads the lowest loss of the last 20 steps and asks
+    for a fold well inside the spread measured over ATEN_CPU_CAPABILITY=default|avx2|avx512 and
+    1|2 threads (experiments/results/threshold_spread.md): the smallest fold measured there is
+    at least twice the one asked for here.
+    """
     torch.manual_seed(0)
     dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=1.5)
     options = {"graph_conv": {"channels": 16, "n_blocks": 1}, "interaction": {"channels": 16}}
     model = make_module(dm, mode, encoding, shift, {"name": encoder, **options[encoder]}, hidden=32)
-    batch = next(iter(dm.train_dataloader()))
+    batch = next(iter(dm.val_dataloader()))  # one fixed window, whatever the shuffling
     opt = torch.optim.Adam(model.parameters(), lr=1e-2)
     losses = []
     for _ in range(200):
@@ -130,8 +144,8 @@ def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
         loss.backward()
         opt.step()
         losses.append(loss.item())
-    fold = 10 if encoding == "unwrapped" else 20
-    assert losses[-1] < losses[0] / fold, (losses[0], losses[-1])
+    fold_reached = losses[0] / min(losses[-20:])
+    assert fold_reached > OVERFIT_FOLD, (losses[0], min(losses[-20:]))
 
 
 @pytest.mark.parametrize(

@@ -229,10 +229,10 @@ def check_tree(roots: list[Path], tmp_root: Path | None = None) -> dict:
 # --------------------------------------------------------------------------------------------
 def exit_kind(row: dict, sig: signal.Signals) -> str:
     """``clean`` (one interrupted line, no traceback, the documented status or death by the
-    signal itself after the line: both show 128 + signal to a shell), ``startup`` (ended by
-    the signal's default action before the command's handler existed: nothing written yet),
-    ``finished`` (the command ended before the signal), ``killed`` (SIGKILL), else
-    ``unclean``."""
+    signal itself after the line: both show 128 + signal to a shell), ``outside`` (ended by
+    the signal's default action outside the command's handler: Python starting, before it,
+    or shutting down, after it; nothing being written), ``finished`` (the command ended
+    before the signal), ``killed`` (SIGKILL), else ``unclean``."""
     if not row["landed"]:
         return "finished"
     if sig == signal.SIGKILL:
@@ -241,7 +241,7 @@ def exit_kind(row: dict, sig: signal.Signals) -> str:
     if row["rc"] in (CLEAN_STATUS[sig], -sig) and row["interrupted_lines"] == 1 and quiet:
         return "clean"
     if row["rc"] == -sig and row["interrupted_lines"] == 0 and quiet:
-        return "startup"
+        return "outside"
     return "unclean"
 
 
@@ -250,7 +250,7 @@ def summarise(rows: list[dict], commands: list[str]) -> tuple[list[str], list[li
     headers += [
         "half-written files",
         "temp files left",
-        "clean TERM/INT exits (default action at startup)",
+        "clean TERM/INT exits (default action outside the handler)",
     ]
     headers += [
         "next command ok",
@@ -265,7 +265,7 @@ def summarise(rows: list[dict], commands: list[str]) -> tuple[list[str], list[li
         by = [sum(r["signal"] == s.name for r in rs) for s in SIGNALS]
         soft = [r for r in rs if r["signal"] != "SIGKILL" and r["landed"]]
         clean = sum(r["exit"] == "clean" for r in soft)
-        startup = sum(r["exit"] == "startup" for r in soft)
+        outside = sum(r["exit"] == "outside" for r in soft)
         resume = "–"
         diffs = [r["resume_diff"] for r in rs if "resume_diff" in r]
         if name == "run":
@@ -281,7 +281,7 @@ def summarise(rows: list[dict], commands: list[str]) -> tuple[list[str], list[li
                 sum(len(r["strays"]) + len(r["next_strays"]) + r["hung"] for r in rs),
                 sum(len(r["bad_files"]) for r in rs),
                 sum(len(r["temporary"]) for r in rs),
-                f"{clean}/{len(soft)} ({startup})",
+                f"{clean}/{len(soft)} ({outside})",
                 f"{sum(r['next_rc'] == 0 for r in rs)}/{len(rs)}",
                 sum(len(r["cache_temporary"]) for r in rs),
                 resume,

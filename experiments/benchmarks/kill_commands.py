@@ -19,8 +19,8 @@ does not stop itself) or SIGINT (to the whole group: a terminal's Ctrl-C), in tu
   temporary files (``.NAME.tmp-*``, anything in ``TMPDIR``) are counted apart;
 - **clean exit**: after SIGTERM / SIGINT, one ``interrupted:`` line, no traceback and status
   143 / 130 (or death by that signal after the line: the same status to a shell); a signal
-  that lands while Python itself starts, before the command's handler exists, ends it by the
-  signal's default action, with nothing written yet: counted apart;
+  that lands outside the command's handler (Python starting, before it, or shutting down,
+  after it: nothing being written) ends it by the signal's default action: counted apart;
 - **next ok**: the same command again (``--overwrite`` for the commands that refuse to replace
   complete outputs; ``resume=true`` in the same folder for ``run``) completes with status 0,
   and leaves no temporary file in the dataset cache;
@@ -68,8 +68,8 @@ LEGEND = (
     "`handback` (data, XYZ, dump), `convert lammps` (a 106-frame dump). Landed mid-run: the "
     "signal came before the command ended. Strays: processes of the command alive 5 s after "
     "the signal (or after the next command). Temp files: `.NAME.tmp-*` left by SIGKILL (never "
-    "a final name). Default action at startup: the signal came before or after the "
-    "command's handler (Python starting or shutting down), nothing was being written. Next "
+    "a final name). Default action outside the handler: the signal came while Python started "
+    "or shut down, before or after the command's work. Next "
     "command: the same again (`--overwrite` where complete outputs exist; `resume=true` for "
     "`run`). Resumes: the resumed run's test/rmse against an uninterrupted run's."
 )

@@ -164,37 +164,40 @@ def _csv(path: Path) -> None:
         raise ValueError("ragged or empty CSV")
 
 
+def _gzip(path: Path) -> None:
+    with gzip.open(path, "rb") as handle:
+        while handle.read(1 << 20):
+            pass
+
+
+def _markdown(path: Path) -> None:
+    if not path.read_text().strip():
+        raise ValueError("empty")
+
+
+#: the reader that validates each kind of file (by suffix)
+READERS = {
+    ".gz": _gzip,
+    ".h5": _h5,
+    ".json": lambda path: json.loads(path.read_text()),
+    ".safetensors": _safetensors,
+    ".png": _png,
+    ".ckpt": _ckpt,
+    ".yaml": _yaml,
+    ".xyz": _xyz,
+    ".data": _lammps_data,
+    ".csv": _csv,
+    ".md": _markdown,
+}
+
+
 def check_file(path: Path) -> str | None:
     """``None`` if ``path`` opens and validates with the reader of its kind, else why not."""
-    name = path.name
     try:
-        if name.endswith((".dump", ".dump.gz")):
+        if path.name.endswith((".dump", ".dump.gz")):
             _dump(path)
-        elif path.suffix == ".gz":
-            with gzip.open(path, "rb") as handle:
-                while handle.read(1 << 20):
-                    pass
-        elif path.suffix == ".h5":
-            _h5(path)
-        elif path.suffix == ".json":
-            json.loads(path.read_text())
-        elif path.suffix == ".safetensors":
-            _safetensors(path)
-        elif path.suffix == ".png":
-            _png(path)
-        elif path.suffix == ".ckpt":
-            _ckpt(path)
-        elif path.suffix == ".yaml":
-            _yaml(path)
-        elif path.suffix == ".xyz":
-            _xyz(path)
-        elif path.suffix == ".data":
-            _lammps_data(path)
-        elif path.suffix == ".csv":
-            _csv(path)
-        elif path.suffix == ".md":
-            if not path.read_text().strip():
-                raise ValueError("empty")
+        elif path.suffix in READERS:
+            READERS[path.suffix](path)
     except Exception as exc:  # noqa: BLE001 - any failure to read is the finding
         return f"{type(exc).__name__}: {str(exc).splitlines()[0][:160] if str(exc) else ''}"
     return None

@@ -2,7 +2,8 @@
 
     python -m gripdem.predict CHECKPOINT DATA.h5 [--start FRAME] [--frames N] [--sims S ...]
         [--step M] [--out PRED.h5] [--trajectory TRAJ.h5] [--report REPORT.json]
-        [--overlap-margin F] [--no-overlap] [--device cpu] [--threads T] [--overwrite]
+        [--overlap-margin F] [--no-overlap] [--members M] [--seed S] [--device cpu]
+        [--threads T] [--overwrite]
 
 The model (encoding, normaliser, history length, horizon, graph cut-off, fitted AR baseline)
 comes from the checkpoint; the scene's conventions (box, LE sign and time origin) from the data,
@@ -18,8 +19,14 @@ Writes (atomically; existing files are kept unless ``--overwrite``):
   out from the same observed frames in one go;
 - ``TRAJ.h5`` (default ``PRED_trajectory.h5``): the observed frames followed by all predicted
   ones as a gripdem dataset, the input of :mod:`gripdem.handback` (and of this command again);
-- ``REPORT.json`` (default ``PRED_rollout.json``): per predicted frame the RMSE of the model and
-  of each baseline where a truth exists, the divergence checks, and what was decided.
+- ``REPORT.json`` (default ``PRED_rollout.json``): per predicted frame the RMSE and the CRPS of
+  the model and of each baseline where a truth exists (an ensemble: its mean's RMSE, its
+  members' CRPS, each member's RMSE, the spread/skill ratio and the rank histogram), the
+  divergence checks, and what was decided;
+- ``PRED_ensemble.h5`` (``--members M > 1``): the members' mean position and spread per frame.
+
+An ensemble model (``model=ensemble``) rolls out ``--members M`` members per simulation, each a
+sample contact-corrected like any trajectory, reproducible from ``--seed``.
 """
 
 from __future__ import annotations
@@ -39,7 +46,12 @@ def _outputs(args) -> tuple[Path, Path, Path]:
     stem = out.with_suffix("")
     traj = Path(args.trajectory) if args.trajectory else Path(f"{stem}_trajectory.h5")
     report = Path(args.report) if args.report else Path(f"{stem}_rollout.json")
-    for path in (out, traj, report):
+    paths = [out, traj, report]
+    if args.members > 1:
+        from gripdem.inference.apply import ensemble_path
+
+        paths.append(ensemble_path(out))
+    for path in paths:
         if path.exists() and not args.overwrite:
             raise FileExistsError(f"{path}: exists; refusing to overwrite it (pass --overwrite)")
     return out, traj, report
@@ -69,14 +81,23 @@ def _summary_lines(report: dict[str, Any], divergence: list[str], path: Path) ->
         lines.append("RMSE / d at predicted frame " + ", ".join(str(m) for m in marks) + ":")
         for name, values in per_step.items():
             lines.append(f"  {name:18s} " + "  ".join(f"{values[m - 1]:.4g}" for m in marks))
+        lines.append("CRPS / d (a point forecast's: its absolute error) at the same frames:")
+        for name, values in report["crps_over_d"].items():
+            lines.append(f"  {name:18s} " + "  ".join(f"{values[m - 1]:.4g}" for m in marks))
+        if "spread_skill" in report:
+            ratio = report["spread_skill"]
+            hist = report["rank_histogram_frames_1_100"]
+            lines.append(
+                f"ensemble of {report['members']}: spread/skill "
+                + "  ".join(f"{ratio[m - 1]:.3f}" for m in marks)
+                + f" (1: calibrated); rank histogram (frames 1-100) bins "
+                f"{min(hist) * len(hist):.2f}-{max(hist) * len(hist):.2f} of uniform"
+            )
     lines += [f"divergence: {line}" for line in divergence]
     lines += [f"note: {note}" for note in report["notes"]]
     outputs = report["outputs"]
-    lines.append(
-        "wrote "
-        + ", ".join(str(p) for p in (outputs["predictions"], outputs["trajectory"]) if p)
-        + f", {path}"
-    )
+    written = (outputs["predictions"], outputs["trajectory"], outputs.get("ensemble"))
+    lines.append("wrote " + ", ".join(str(p) for p in written if p) + f", {path}")
     return lines
 
 
@@ -124,6 +145,21 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="D",
         help="contact correction: closest centre distance allowed, in diameters (default 1)",
     )
+    p.add_argument(
+        "--members",
+        type=int,
+        default=1,
+        metavar="M",
+        help="an ensemble model: roll out M members per simulation (each a valid trajectory, "
+        "rows s*M+m of the trajectory file; PRED_ensemble.h5 holds their mean and spread, "
+        "predictions.h5 their mean); a deterministic model has one",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        metavar="S",
+        help="seed of the members' noise (the same seed, the same members; default: random)",
+    )
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--threads", type=int, metavar="T", help="torch CPU threads")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
@@ -133,7 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = build_parser()
     args = parser.parse_args(argv)
-    for name in ("frames", "step", "threads"):
+    for name in ("frames", "step", "threads", "members"):
         value = getattr(args, name)
         if value is not None and value < 1:
             parser.error(f"--{name} must be a positive integer, got {value}")

@@ -65,18 +65,28 @@ def test_scene_cost_quick(run_script, tmp_path):
 
 
 def test_surrogate_rollout_quick(run_script, tmp_path):
-    out = run_script("benchmarks/surrogate_rollout", "--out-dir", str(tmp_path))
+    """Smoke ensembles of 3 members beside the smoke point models (the references)."""
+    out = run_script("benchmarks/surrogate_rollout", "--out-dir", str(tmp_path), "--members", "3")
     report = json.loads((tmp_path / "surrogate_rollout.json").read_text())
     for scene in ("pbc", "lebc"):
+        ensemble, reference = report["scenes"][scene], report["scenes"][f"{scene} (reference)"]
+        assert ensemble["members"] == 3 and reference["members"] == 1
+        assert len(ensemble["member_blocks"]) == 2 and len(ensemble["spread_over_d"]) == 2
+        assert len(ensemble["spread_skill"]) == 40 and len(ensemble["rank_histogram"]) == 4
+        assert min(ensemble["spread_over_d"]) > 0
+        assert set(ensemble["crps_over_d"]) == set(reference["crps_over_d"])
+    for scene in ("pbc", "lebc", "pbc (reference)", "lebc (reference)"):
         data = report["scenes"][scene]
         assert data["frames"] == 40 and data["dem_ms_per_frame"] > 0
         assert set(data["rmse_over_d"]) == {"model", "constant_velocity", "linear_ar"}
         assert len(data["blocks"]["blocks"]) == 2 and data["noise_floor"]["blocks"]
-        assert data["handback"] and (tmp_path / f"surrogate_rollout_{scene}.png").exists()
+        stem = scene.replace(" (reference)", "_reference")
+        assert data["handback"] and (tmp_path / f"surrogate_rollout_{stem}.png").exists()
         # the stable setting: contact correction, nothing closer than 0.98 d in a kept frame
         assert data["settings"]["contact_correction"] is True
         assert max(data["blocks"]["overlap_per_frame"]["model"]) == 0.0
     assert "| target | measured (worst) | verdict |" in out
+    assert "| spread/skill 0.8-1.2 at every frame 1-40 |" in out
 
 
 def test_model_front_quick(run_script, tmp_path):

@@ -3,6 +3,8 @@
     python experiments/benchmarks/surrogate_rollout.py --checkpoint pbc=RUN/checkpoints/best.ckpt \
         lebc=RUN/checkpoints/best.ckpt [--frames 2000] [--block 100] [--threads 1]
         [--link L] [--no-correction] [--out-dir experiments/results] [--name surrogate_rollout]
+    python experiments/benchmarks/surrogate_rollout.py --checkpoint pbc=ENS.safetensors \
+        --members 8 --seed 0 --reference pbc=pretrained:pbc   # an ensemble beside the point model
     python experiments/benchmarks/surrogate_rollout.py --quick   # smoke models on the tiny scene
 
 For each scene, the truth is one new simulation of the built-in DEM (seed 777, which no training
@@ -20,6 +22,13 @@ out from its first ``K + 1`` frames for all ``frames`` frames through the in-mem
   DEM for 100 steps, kinetic energy against the same restart from the true state;
 - wall time per predicted frame, the model (with its per-part breakdown) against the DEM
   restarted from the true state, in the same run.
+
+An ensemble model (``--members M``) rolls out ``M`` members from the same observed frames
+(seeded with ``--seed``). The block statistics above are computed for every member (the tables
+show member 0 and the worst over the members); beside them: the self-diffusion coefficient per
+axis, the ensemble's spread per block, and over frames 1-100 the CRPS, the spread/skill ratio and
+the rank histogram, against the CRPS (absolute error) of CV, AR and a ``--reference`` model (the
+deterministic surrogate, rolled out in the same run on the same truth, with the same statistics).
 """
 
 from __future__ import annotations
@@ -40,8 +49,18 @@ from surrogate_tables import summary_tables
 
 from gripdem.data.dataset_io import read_meta
 from gripdem.dem.output import ensure_scene_dataset
+from gripdem.evaluation.ensemble_scores import (
+    crps_per_step,
+    ensemble_mean_and_spread,
+    rank_histogram,
+    spread_skill_per_step,
+)
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step
-from gripdem.evaluation.rollout_stats import block_statistics
+from gripdem.evaluation.rollout_stats import (
+    DIFFUSION_LAGS,
+    block_statistics,
+    diffusion_coefficients,
+)
 from gripdem.inference.checkpoint import load_model
 from gripdem.inference.rollout import rollout
 from gripdem.inference.stepper import PARTS, StepperSettings
@@ -67,13 +86,17 @@ def read_sim(path: Path, sim: int, stop: int | None = None):
         )
 
 
-def short_term(model, meta, run, truth, times, k: int, frames: int) -> dict:
-    """RMSE / d per frame 1..frames of the model and the CV and AR baselines."""
+def short_term(model, meta, members, truth, times, k: int, frames: int) -> dict:
+    """Per frame 1..frames: RMSE / d of the model (an ensemble's mean) and of the CV and AR
+    baselines, and the CRPS / d of each (the members' fair CRPS; a point forecast's absolute
+    error); for an ensemble also the spread/skill ratio and the rank histogram (frames pooled).
+    ``members`` ``(M, frames >= n, N, 3)``."""
     observed = torch.from_numpy(truth[None, : k + 1])
     in_off = torch.from_numpy(meta.boundary.offset(times[None, : k + 1]))
     out_off = meta.boundary.offset(times[None, k + 1 : k + 1 + frames])
     true = truth[None, k + 1 : k + 1 + frames]
-    out = {"model": run.predicted[:, :frames]}
+    members = members[:, None, :frames]  # (M, 1, n, N, 3)
+    out = {"model": ensemble_mean_and_spread(members, meta.box, out_off)[0]}
     for name in ("constant_velocity", "linear_ar"):
         out[name] = predict_baseline(
             name,
@@ -85,12 +108,35 @@ def short_term(model, meta, run, truth, times, k: int, frames: int) -> dict:
             model.linear_ar,
             model.boundary,
         ).numpy()
-    return {
-        name: (
-            rmse_per_step(position_residuals(pred, true, meta.box, out_off)) / meta.diameter
-        ).tolist()
-        for name, pred in out.items()
+    d = meta.diameter
+    report = {
+        "rmse_over_d": {
+            name: (rmse_per_step(position_residuals(pred, true, meta.box, out_off)) / d).tolist()
+            for name, pred in out.items()
+        }
     }
+    forecasts = {**out, "model": members}
+    report["crps_over_d"] = {
+        name: (crps_per_step(position_residuals(pred, true, meta.box, out_off)) / d).tolist()
+        for name, pred in forecasts.items()
+    }
+    if len(members) > 1:
+        res = position_residuals(members, true, meta.box, out_off)
+        report["spread_skill"] = spread_skill_per_step(res).tolist()
+        report["rank_histogram"] = rank_histogram(res).tolist()
+        report["member_rmse_over_d"] = (rmse_per_step(res[0]) / d).tolist()
+    return report
+
+
+def spread_per_block(members, times, meta, block: int) -> list[float]:
+    """The members' RMS distance from their mean per block of frames, in diameters."""
+    offsets = meta.boundary.offset(times)
+    mean, spread = ensemble_mean_and_spread(members, meta.box, offsets)
+    per_frame = np.sqrt(np.mean(spread**2, axis=-1) / len(members) * (len(members) - 1))
+    return [
+        float(per_frame[lo + 1 : lo + 1 + block].mean() / meta.diameter)
+        for lo in range(0, len(per_frame) - 1, block)
+    ]
 
 
 def noise_floor(scene: str, preset: str, frames: int, block: int) -> dict:
@@ -102,7 +148,7 @@ def noise_floor(scene: str, preset: str, frames: int, block: int) -> dict:
     return block_statistics(b, a, times, meta.boundary, meta.diameter, block=block)
 
 
-def evaluate_scene(scene, checkpoint, args, preset) -> dict:
+def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     model = load_model(checkpoint, read_meta(scene_dataset(scene, preset)))
     k = int(model.hparams.history_len)
     path = truth_dataset(scene, preset, k + 1 + args.frames)
@@ -119,47 +165,71 @@ def evaluate_scene(scene, checkpoint, args, preset) -> dict:
         args.frames,
         settings,
         check_overlap=False,
+        members=members,
+        seed=args.seed,
     )
     wall = time.perf_counter() - started
     stepper = run.stepper
-    predicted = np.concatenate([truth[k : k + 1], run.predicted[0]])  # frame 0: last observed
-    span = slice(k, k + 1 + run.n_predicted)
+    n = run.n_predicted
+    start = np.broadcast_to(truth[k : k + 1], (members, 1) + truth.shape[1:])
+    predicted = np.concatenate([start, run.by_member(run.predicted)[0]], axis=1)  # frame 0
+    span = slice(k, k + 1 + n)
     config = generator_config(path)
+    stat_members = min(members, args.stat_members or members)
+    member_blocks = [
+        block_statistics(
+            predicted[m], truth[span], times[span], meta.boundary, meta.diameter, block=args.block
+        )
+        for m in range(stat_members)
+    ]
+    per_frame = members * max(n, 1)  # a member's frame: the rows advance together
     report = {
         "scene": scene,
         "checkpoint": str(checkpoint),
+        "ensemble": bool(model.is_ensemble),
+        "members": members,
+        "seed": args.seed,
         "truth": str(path),
-        "frames": run.n_predicted,
+        "frames": n,
         "stopped": run.divergence.stopped,
         "settings": settings.to_dict() | {"link": stepper.link},
-        "model_ms_per_frame": 1e3 * wall / max(run.n_predicted, 1),
-        "breakdown_ms_per_frame": {
-            p: 1e3 * stepper.seconds[p] / max(run.n_predicted, 1) for p in PARTS
-        },
+        "model_ms_per_frame": 1e3 * wall / per_frame,
+        "breakdown_ms_per_frame": {p: 1e3 * stepper.seconds[p] / per_frame for p in PARTS},
         "dem_ms_per_frame": 1e3 * dem_seconds_per_frame(config, truth[k:], times[k:]),
-        "rmse_over_d": short_term(model, meta, run, truth, times, k, min(100, run.n_predicted)),
+        **short_term(model, meta, predicted[:, 1:], truth, times, k, min(100, n)),
         "correction": stepper.report.__dict__,
-        "blocks": block_statistics(
-            predicted, truth[span], times[span], meta.boundary, meta.diameter, block=args.block
-        ),
+        "blocks": member_blocks[0],
+        "member_blocks": [b["blocks"] for b in member_blocks[1:]],
         "noise_floor": noise_floor(scene, preset, min(201, args.frames + 1), args.block),
         "handback": handback_ratios(
             config,
-            predicted,
+            predicted[0],
             truth[span],
             times[span],
-            [f for f in (10, 100, 1000, 2000) if f <= run.n_predicted],
+            [f for f in (10, 100, 1000, 2000) if f <= n],
             args.handback_steps,
         ),
     }
+    if members > 1:
+        report["spread_over_d"] = spread_per_block(predicted, times[span], meta, args.block)
+    if n >= DIFFUSION_LAGS[1]:
+        fit = (truth[span], times[span], meta.boundary, meta.diameter)
+        report["diffusion"] = {
+            "truth": diffusion_coefficients(truth[span], *fit).tolist(),
+            "members": [
+                diffusion_coefficients(predicted[m], *fit).tolist() for m in range(stat_members)
+            ],
+        }
     report["speedup"] = report["dem_ms_per_frame"] / report["model_ms_per_frame"]
     return report
 
 
-def quick_checkpoints(work: Path) -> dict[str, Path]:
+def quick_checkpoints(work: Path, model: str = "interaction") -> dict[str, Path]:
     out = {}
     for scene in ("pbc", "lebc"):
-        run = train_run(work / scene, ["experiment=smoke", f"scene={scene}"])
+        run = train_run(
+            work / f"{scene}_{model}", ["experiment=smoke", f"scene={scene}", f"model={model}"]
+        )
         out[scene] = run / "checkpoints" / "best.ckpt"
     return out
 
@@ -172,6 +242,18 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--link", type=int, help="frames kept per forward pass")
     parser.add_argument("--no-correction", action="store_true")
     parser.add_argument("--handback-steps", type=int, default=100)
+    parser.add_argument("--members", type=int, default=1, help="ensemble members per scene")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the members' noise")
+    parser.add_argument(
+        "--stat-members", type=int, help="members with block statistics (default: all)"
+    )
+    parser.add_argument(
+        "--reference",
+        nargs="+",
+        default=[],
+        metavar="SCENE=PATH",
+        help="a model to run beside, one member (the deterministic surrogate)",
+    )
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--out-dir", type=Path, default=Path("experiments/results"))
@@ -181,24 +263,37 @@ def main(argv: list[str] | None = None) -> dict:
     preset = "tiny" if args.quick else "default"
     if args.quick:
         args.frames, args.block = min(args.frames, 40), min(args.block, 20)
-        checkpoints = quick_checkpoints(Path(tempfile.mkdtemp(prefix="surrogate_")))
+        work = Path(tempfile.mkdtemp(prefix="surrogate_"))
+        checkpoints = quick_checkpoints(work)
+        if args.members > 1:  # smoke ensembles, the smoke point models beside them
+            args.reference = [f"{s}={p}" for s, p in checkpoints.items()]
+            checkpoints = quick_checkpoints(work, "ensemble")
     else:
         checkpoints = {s: Path(p) for s, p in (c.split("=", 1) for c in args.checkpoint)}
     if not checkpoints:
         parser.error("give --checkpoint pbc=PATH lebc=PATH (or --quick)")
+    references = {s: Path(p) for s, p in (c.split("=", 1) for c in args.reference)}
+    scenes = {}
+    for scene, checkpoint in checkpoints.items():
+        if scene in references:
+            scenes[f"{scene} (reference)"] = evaluate_scene(scene, references[scene], args, preset)
+        scenes[scene] = evaluate_scene(scene, checkpoint, args, preset, args.members)
     report = {
         "machine": machine_line(),
         "args": {k: str(v) for k, v in vars(args).items()},
-        "scenes": {s: evaluate_scene(s, c, args, preset) for s, c in checkpoints.items()},
+        "scenes": scenes,
     }
     args.out_dir.mkdir(parents=True, exist_ok=True)
     markdown = summary_tables(report)
     (args.out_dir / f"{args.name}.md").write_text(markdown)
     (args.out_dir / f"{args.name}.json").write_text(json.dumps(report, indent=1, default=float))
     for scene, data in report["scenes"].items():
-        run_name = Path(data["checkpoint"]).parent.parent.name
+        run_name = Path(data["checkpoint"]).parent.parent.name or data["checkpoint"]
         title = f"{scene}: {data['frames']} frames out of sample ({run_name})"
-        save_figure(plot_surrogate(data, title), args.out_dir / f"{args.name}_{scene}.png")
+        if data["members"] > 1:
+            title += f", member 0 of {data['members']}"
+        stem = scene.replace(" (reference)", "_reference")
+        save_figure(plot_surrogate(data, title), args.out_dir / f"{args.name}_{stem}.png")
     print(markdown)
     return report
 

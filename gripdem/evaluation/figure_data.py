@@ -31,6 +31,7 @@ BASELINE_LABELS = {
     "constant_velocity": "constant velocity",
     "linear_ar": "linear AR",
     "mean_flow": "mean-flow profile",
+    "member_0": "one ensemble member",
 }
 
 

@@ -15,8 +15,14 @@ import numpy as np
 import torch
 
 from gripdem.data.dataset_io import read_meta, write_dataset
-from gripdem.data.h5io import atomic_write_text
+from gripdem.data.h5io import atomic_h5_write, atomic_write_text
 from gripdem.data.schema import DatasetMeta, TrajectoryData
+from gripdem.evaluation.ensemble_scores import (
+    crps_per_step,
+    ensemble_mean_and_spread,
+    rank_histogram,
+    spread_skill_per_step,
+)
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.inference.checkpoint import check_compatible, load_model, training_overlap
@@ -48,6 +54,53 @@ def _per_step(pred, true, times, meta: DatasetMeta) -> list[float]:
     offsets = meta.boundary.offset(times)
     res = position_residuals(pred, true, meta.box, offsets)
     return [float(v) / meta.diameter for v in rmse_per_step(res)]
+
+
+def ensemble_path(out: Path) -> Path:
+    return out.with_name(f"{out.with_suffix('').name}_ensemble.h5")
+
+
+def _write_ensemble(path: Path, run, meta: DatasetMeta, info: dict, overwrite: bool) -> None:
+    """``PRED_ensemble.h5``: per simulation and frame (observed and predicted), the members'
+    mean position ``mean_positions (S, T, N, 3)`` and spread ``spread (S, T, N)`` (m: square
+    root of the unbiased member variance summed over the axes), with ``times (S, T)``."""
+    members = run.by_member(run.positions).swapaxes(0, 1)
+    times = run.times[:: run.members]
+    mean, spread = ensemble_mean_and_spread(members, meta.box, meta.boundary.offset(times))
+    with atomic_h5_write(path, overwrite=overwrite) as h5:
+        h5.create_dataset("mean_positions", data=mean)
+        h5.create_dataset("spread", data=spread)
+        h5.create_dataset("times", data=times)
+        h5.attrs["members"] = run.members
+        h5.attrs["n_observed"] = run.n_observed
+        h5.attrs["description"] = (
+            "ensemble mean position and spread (m, sqrt of the unbiased member variance summed "
+            "over x, y, z) per simulation, frame and particle; the members are the "
+            "trajectory file's rows"
+        )
+        h5.attrs["info"] = json.dumps(info)
+
+
+def _ensemble_scores(member_pred, true, times, meta: DatasetMeta, baselines) -> dict[str, Any]:
+    """Per predicted frame with a truth: the CRPS / d of the model (its members' fair CRPS) and
+    of every baseline (their absolute error), each member's RMSE / d, and for an ensemble the
+    spread/skill ratio and the rank histogram over the first 100 frames."""
+    offsets = meta.boundary.offset(times)
+    d = meta.diameter
+
+    def crps(forecast) -> list[float]:
+        res = position_residuals(forecast, true, meta.box, offsets)
+        return [float(v) / d for v in crps_per_step(res)]
+
+    out: dict[str, Any] = {"crps_over_d": {"model": crps(member_pred)}}
+    out["crps_over_d"].update({name: crps(values) for name, values in baselines.items()})
+    if len(member_pred) < 2:
+        return out
+    res = position_residuals(member_pred, true, meta.box, offsets)
+    out["member_rmse_over_d"] = [[float(v) / d for v in rmse_per_step(r)] for r in res]
+    out["spread_skill"] = [float(v) for v in spread_skill_per_step(res)]
+    out["rank_histogram_frames_1_100"] = rank_histogram(res, slice(0, 100)).tolist()
+    return out
 
 
 def apply_checkpoint(
@@ -84,6 +137,8 @@ def apply_checkpoint(
         contact_correction=not getattr(args, "no_correction", False),
         contact_distance=float(getattr(args, "contact_distance", 1.0)),
     )
+    members = int(getattr(args, "members", 1) or 1)
+    seed = getattr(args, "seed", None)
     run = rollout(
         model.to(args.device),
         meta,
@@ -93,6 +148,8 @@ def apply_checkpoint(
         settings,
         args.overlap_margin,
         not args.no_overlap,
+        members=members,
+        seed=seed,
     )
     first = start + k + 1
     n_truth = max(0, min(run.n_predicted, meta.n_frames - first))
@@ -115,16 +172,25 @@ def apply_checkpoint(
         "encoding": hp["encoding"],
         "decoder_mode": hp["decoder_mode"],
         "encoder": (hp.get("encoder") or {}).get("name", "graph_conv"),
+        "ensemble": bool(model.is_ensemble),
+        "members": members,
+        "seed": seed,
     }
     per_step: dict[str, list[float]] = {}
+    scores: dict[str, Any] = {}
+    mean_path = ensemble_path(out) if members > 1 else None
+    if members > 1:
+        _write_ensemble(mean_path, run, meta, info, args.overwrite)
     if n_truth:
         true = _read_frames(data_path, sims, first, first + n_truth)
-        times = run.times[:, k + 1 : k + 1 + n_truth]
-        pred = run.predicted[:, :n_truth]
-        baselines = _baselines(model, observed, run.times[:, : k + 1], times, meta)
+        times = run.times[:: run.members, k + 1 : k + 1 + n_truth]
+        member_pred = run.by_member(run.predicted[:, :n_truth]).swapaxes(0, 1)  # (M, S, ...)
+        pred = ensemble_mean_and_spread(member_pred, meta.box, meta.boundary.offset(times))[0]
+        baselines = _baselines(model, observed, run.times[:: run.members, : k + 1], times, meta)
         per_step["model"] = _per_step(pred, true, times, meta)
         for name, values in baselines.items():
             per_step[name] = _per_step(values, true, times, meta)
+        scores = _ensemble_scores(member_pred, true, times, meta, baselines)
         predictions = Predictions(
             pred_positions=pred,
             true_positions=true,
@@ -153,7 +219,12 @@ def apply_checkpoint(
         radii=radii,
         provenance={
             "generator": "gripdem.predict",
-            "parameters": {**info, "notes": notes, "source_provenance": meta.provenance},
+            "parameters": {
+                **info,
+                "rows": "simulation s, member m is row s * members + m",
+                "notes": notes,
+                "source_provenance": meta.provenance,
+            },
         },
     )
     write_dataset(traj_path, trajectory, overwrite=args.overwrite)
@@ -165,10 +236,12 @@ def apply_checkpoint(
         "outputs": {
             "predictions": str(out) if n_truth else None,
             "trajectory": str(traj_path),
+            "ensemble": None if mean_path is None else str(mean_path),
         },
         "frame_interval": meta.frame_interval,
         "diameter": meta.diameter,
         "rmse_over_d": per_step,
+        **scores,
         "divergence": {
             "first": div.first,
             "stopped": div.stopped,

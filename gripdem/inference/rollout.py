@@ -16,8 +16,14 @@ Divergence is flagged per predicted frame, never raised:
   kept, after any contact correction; the model's own overlaps before the correction are in
   the stepper's report) exceeds the observed frame's by more than ``overlap_margin``.
 
-Shapes: ``S`` simulations rolled out together (one batch), ``N`` particles, positions
-``(S, frames, N, 3)`` wrapped float64, times ``(S, frames)`` absolute.
+An ensemble model (one whose forward pass draws latent noise) rolls out ``members`` members
+from every observed window: the observed frames are repeated, so member ``m`` of simulation
+``s`` is row ``s * members + m`` of the batch, each an independent sample advanced and
+contact-corrected like any trajectory; ``seed`` makes the draws reproducible.
+
+Shapes: ``S`` simulations rolled out together (one batch; ``S * members`` rows for an
+ensemble), ``N`` particles, positions ``(rows, frames, N, 3)`` wrapped float64, times
+``(rows, frames)`` absolute.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 
 from gripdem.boundary import displacement
 from gripdem.data.schema import DatasetMeta
@@ -76,6 +83,11 @@ class Rollout:
     n_observed: int
     divergence: Divergence
     stepper: Stepper | None = None
+    members: int = 1
+
+    @property
+    def n_sims(self) -> int:
+        return self.positions.shape[0] // self.members
 
     @property
     def n_predicted(self) -> int:
@@ -83,8 +95,13 @@ class Rollout:
 
     @property
     def predicted(self) -> np.ndarray:
-        """``(S, n_predicted, N, 3)``."""
+        """``(S * members, n_predicted, N, 3)`` (member ``m`` of sim ``s`` in row
+        ``s * members + m``)."""
         return self.positions[:, self.n_observed :]
+
+    def by_member(self, frames: np.ndarray) -> np.ndarray:
+        """Rows ``(S * members, ...)`` -> ``(S, members, ...)``."""
+        return frames.reshape((self.n_sims, self.members) + frames.shape[1:])
 
 
 def _record(
@@ -132,11 +149,16 @@ def rollout(
     settings: StepperSettings | None = None,
     overlap_margin: float = OVERLAP_MARGIN,
     check_overlap: bool = True,
+    members: int = 1,
+    seed: int | None = None,
 ) -> Rollout:
     """Roll ``model`` out for ``frames`` frames after the ``K + 1`` observed frames
     ``(S, K+1, N, 3)`` (times ``(S, K+1)``) with the in-memory :class:`Stepper` (``settings``:
     link length, contact correction; default the stable setting). Stops early only at
-    non-finite positions. The model must already be on its device."""
+    non-finite positions. The model must already be on its device. An ensemble model rolls
+    out ``members`` members per simulation, its noise drawn from a generator seeded with
+    ``seed`` (None: torch's global generator)."""
+    observed, observed_times = ensemble_start(model, observed, observed_times, members, seed)
     stepper = Stepper(model, observed, observed_times, settings)
     k = stepper.k
     div = Divergence()
@@ -163,4 +185,31 @@ def rollout(
             div.stopped = stepper.stopped
             break
     positions = np.concatenate(kept, axis=1)
-    return Rollout(positions, np.concatenate(times, axis=1), k + 1, div, stepper)
+    return Rollout(positions, np.concatenate(times, axis=1), k + 1, div, stepper, int(members))
+
+
+def ensemble_start(model, observed, observed_times, members: int, seed: int | None):
+    """The observed frames and times repeated ``members`` times per simulation (member-minor
+    rows), and the model's noise generator seeded; a deterministic model accepts only one
+    member."""
+    members = int(members)
+    if members < 1:
+        raise ValueError(f"members must be >= 1, got {members}")
+    if not getattr(model, "is_ensemble", False):
+        if members > 1:
+            raise ValueError(
+                f"this model is deterministic (no latent noise): it has no ensemble, so it "
+                f"rolls out one member, not {members} (--members 1)"
+            )
+        return observed, observed_times
+    device = next(model.parameters()).device
+    generator = torch.Generator(device=device)
+    if seed is None:
+        generator.seed()
+    else:
+        generator.manual_seed(int(seed))
+    model.noise_generator = generator
+    return (
+        np.repeat(np.asarray(observed, np.float64), members, axis=0),
+        np.repeat(np.asarray(observed_times, np.float64), members, axis=0),
+    )

@@ -40,6 +40,7 @@ import torch
 from gripdem.boundary import Boundary, lattice_continuous_steps
 from gripdem.data.encodings import Encoding
 from gripdem.data.normalizer import Normalizer
+from gripdem.evaluation.ensemble_scores import fair_crps
 
 DECODER_MODES = ("grip", "pct", "vct")
 VCT_SHIFTS = ("learned", "exact")
@@ -182,6 +183,18 @@ def exact_loss(mode: str, deviation: torch.Tensor, true_deviation: torch.Tensor)
         )
     cv = torch.mean(true_deviation**2).detach()
     return torch.mean((deviation - true_deviation) ** 2) / cv.clamp_min(1e-12)
+
+
+def exact_crps_loss(mode: str, members: torch.Tensor, true_deviation: torch.Tensor) -> torch.Tensor:
+    """Exact frame, an ensemble: the fair CRPS (:func:`~gripdem.evaluation.ensemble_scores.
+    fair_crps`) of the members ``(M, B, N, f, 3)`` per coordinate of the positions over the
+    horizon (grip, pct: cumulative deviations; vct: per-step displacements), over CV's mean
+    absolute error (the CRPS of CV, a point forecast), so an untrained model scores 1 as it does
+    under :func:`exact_loss`."""
+    if mode != "vct":
+        members, true_deviation = torch.cumsum(members, dim=3), torch.cumsum(true_deviation, dim=2)
+    cv = torch.mean(true_deviation.abs()).detach()
+    return torch.mean(fair_crps(members, true_deviation)) / cv.clamp_min(1e-12)
 
 
 # --------------------------------------------------------------------------------------------

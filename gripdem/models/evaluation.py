@@ -17,6 +17,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from gripdem.evaluation.ensemble_scores import (
+    crps_per_step,
+    rank_flatness,
+    rank_histogram,
+    spread_skill_per_step,
+)
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step, rmse_split
 from gripdem.models.baselines import predict_baseline
 
@@ -38,18 +44,35 @@ class RolloutEvaluation:
         }
 
     def _evaluate(self, batch, stage: str) -> None:
-        pred = self(batch)
-        loss = self._loss(pred, batch)
+        members = None
+        if self.is_ensemble:
+            outputs = self.forward_members(batch, self.hparams.eval_members)
+            pred = outputs.mean(dim=0)  # decode is affine: the mean of the members' positions
+            members = torch.stack([self.decode(p, batch) for p in outputs])
+            loss = self._loss(outputs, batch)
+        else:
+            pred = self(batch)
+            loss = self._loss(pred, batch)
         positions = self.decode(pred, batch)
-        if not torch.isfinite(positions).all():
+        if not torch.isfinite(positions).all() or (
+            members is not None and not torch.isfinite(members).all()
+        ):
             raise FloatingPointError(
                 f"non-finite predicted positions in {stage} at global step {self.global_step}"
             )
-        self.record(batch, positions, float(loss), stage)
+        self.record(batch, positions, float(loss), stage, members)
 
-    def record(self, batch, positions: torch.Tensor, loss: float, stage: str) -> None:
-        """Keep one batch's predicted wrapped positions ``(B, f, N, 3)`` beside its truth and
-        every baseline, for the stage's metrics (also fed by chained rollouts)."""
+    def record(
+        self,
+        batch,
+        positions: torch.Tensor,
+        loss: float,
+        stage: str,
+        members: torch.Tensor | None = None,
+    ) -> None:
+        """Keep one batch's predicted wrapped positions ``(B, f, N, 3)`` (an ensemble's mean,
+        with its ``members`` ``(M, B, f, N, 3)``) beside its truth and every baseline, for the
+        stage's metrics (also fed by chained rollouts)."""
         store = self._eval_store.setdefault(stage, [])
         target = batch.target_positions.double().transpose(1, 2)
         offsets = batch.target_offsets.double() if self.boundary.is_lees_edwards else None
@@ -64,6 +87,7 @@ class RolloutEvaluation:
             "mask": batch.crossing_mask.cpu().numpy(),
             "sim_index": batch.sim_index.cpu(),
             "window_start": batch.window_start.cpu(),
+            "members": None if members is None else members.detach().cpu(),
         }
         record.update({k: v.cpu() for k, v in self.predict_baselines(batch).items()})
         store.append(record)
@@ -86,6 +110,10 @@ class RolloutEvaluation:
             None if records[0]["offsets"] is None else torch.cat([r["offsets"] for r in records])
         )
         out["mask"] = np.concatenate([r["mask"] for r in records])
+        with_members = [r["members"] for r in records if r["members"] is not None]
+        out["members"] = (
+            torch.cat(with_members, dim=1) if len(with_members) == len(records) else None
+        )
         total = sum(r["n"] for r in records)
         out["loss"] = sum(r["loss"] * r["n"] for r in records) / total
         return out
@@ -116,6 +144,42 @@ class RolloutEvaluation:
             metrics[f"{stage}/rmse_ratio_{name}"] = (
                 metrics[f"{stage}/rmse"] / metrics[f"{stage}/rmse_{name}"]
             )
+        metrics.update(self.ensemble_metrics(stage, data))
+        return metrics
+
+    def ensemble_metrics(self, stage: str, data: dict[str, Any]) -> dict[str, float]:
+        """CRPS (m; per step in diameters) for the model (its members' fair CRPS; a point forecast's
+        is its mean absolute error) and every baseline; for an ensemble also the spread/skill
+        ratio per step, a member's RMSE and the rank histogram's extreme bins over uniform."""
+        box, d = self.boundary.box, self.diameter
+        metrics: dict[str, float] = {}
+        members = data.get("members")
+        forecasts = {"crps": data["pred"] if members is None else members}
+        forecasts.update({f"crps_{name}": data[name] for name in self.baselines})
+        for key, forecast in forecasts.items():
+            res = position_residuals(forecast, data["true"], box, data["offsets"])
+            per_step = crps_per_step(res)
+            metrics[f"{stage}/{key}"] = float(per_step.mean())
+            if key == "crps":
+                metrics[f"{stage}/crps_over_d"] = float(per_step.mean()) / d
+                for step, value in enumerate(per_step / d, start=1):
+                    metrics[f"{stage}/crps_step/{step:03d}"] = float(value)
+        if members is None:
+            return metrics
+        res = position_residuals(members, data["true"], box, data["offsets"])
+        metrics[f"{stage}/members"] = float(members.shape[0])
+        ratio = spread_skill_per_step(res)
+        metrics[f"{stage}/spread_skill"] = float(ratio.mean())
+        for step, value in enumerate(ratio, start=1):
+            metrics[f"{stage}/spread_skill_step/{step:03d}"] = float(value)
+        metrics[f"{stage}/rmse_member"] = float(np.sqrt(np.mean(rmse_per_step(res[0]) ** 2)))
+        deviation = res - res.mean(dim=0)  # a member's distance from the ensemble mean
+        spread = deviation.pow(2).sum(-1).mean(dim=(0, 1, 3)).sqrt() / d  # (f,)
+        metrics[f"{stage}/spread_over_d"] = float(spread.mean())
+        metrics[f"{stage}/spread_last_step_over_d"] = float(spread[-1])
+        top, bottom = rank_flatness(rank_histogram(res))
+        metrics[f"{stage}/rank_max_over_uniform"] = top
+        metrics[f"{stage}/rank_min_over_uniform"] = bottom
         return metrics
 
     def results(self, stage: str) -> dict[str, Any]:

@@ -32,6 +32,7 @@ from gripdem.data.normalizer import Normalizer
 from gripdem.models import decoder_modes as modes
 from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
+from gripdem.models.ensemble import EnsembleMembers
 from gripdem.models.evaluation import RolloutEvaluation
 from gripdem.models.training import TrainingSteps
 from gripdem.nn.direct import DirectDecoder
@@ -52,7 +53,14 @@ ENCODER_OPTIONS = {
         "edge_feature_dim",
         "dense_init",
     ),
-    "interaction": ("channels", "rounds", "edge_history", "edge_updates", "position_features"),
+    "interaction": (
+        "channels",
+        "rounds",
+        "edge_history",
+        "edge_updates",
+        "position_features",
+        "noise_channels",
+    ),
 }
 LR_SCHEDULES = ("constant", "cosine")
 DECODERS = ("gru", "direct")
@@ -94,7 +102,7 @@ def _uses_position_features(setting: Any, boundary: Boundary) -> bool:
     return not boundary.is_lees_edwards if setting == "auto" else setting == "true"
 
 
-class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
+class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.LightningModule):
     """GRIP++ / PCT / VCT on a graph encoder and the seq2seq GRU block.
 
     Args:
@@ -125,6 +133,10 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
         graph_cutoff: the graph's cut-off in diameters (scales the edge features).
         profile: mean-flow baseline profile (``cosine`` | ``linear``; default by boundary).
         linear_ar: :meth:`LinearAR.to_dict` of the fitted AR baseline (None: not reported).
+        loss: ``mse`` (the conditional mean) | ``crps`` (the fair CRPS of ``members``
+            members per window: an ensemble learns the spread too; :mod:`gripdem.models.ensemble`).
+        members, eval_members: ensemble members per window in training and in validation/test
+            (``encoder.noise_channels > 0``: one forward pass draws one member).
     """
 
     def __init__(
@@ -155,6 +167,9 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
         graph_cutoff: float = 3.0,
         profile: str | None = None,
         linear_ar: dict[str, Any] | None = None,
+        loss: str = "mse",
+        members: int = 2,
+        eval_members: int = 8,
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)
@@ -203,6 +218,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
             raise ValueError(
                 "model.zero_mean=true needs the exact frame (model.encoding=unwrapped)"
             )
+        self._check_ensemble(loss, members, eval_members)
         self._eval_store: dict[str, list] = {}
         self.accuracy_curve: list[tuple[float, int, float]] = []
         self._fit_started: float | None = None
@@ -289,22 +305,27 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, L.LightningModule):
             static = torch.stack([torch.sin(theta), torch.cos(theta)], -1).float()
         return relative, static
 
-    def _encode(self, batch) -> torch.Tensor:
-        """Per-particle features ``(B, N, T, C)`` for the seq2seq block."""
+    def _encode(self, batch, noise: torch.Tensor | None = None) -> torch.Tensor:
+        """Per-particle features ``(B, N, T, C)`` for the seq2seq block (an ensemble model
+        draws its noise when none is given)."""
         if self.encoder_name == "interaction":
             history, static = self._interaction_inputs(batch)
-            return self.encoder(history, static, self.contact_graph(batch))
+            if noise is None and self.is_ensemble:
+                noise = self.sample_noise(history.shape[0], history.shape[1])
+            return self.encoder(history, static, self.contact_graph(batch), noise)
         inputs = batch.inputs
         if self.training and self.hparams.input_noise > 0:
             inputs = inputs + self.hparams.input_noise * torch.randn_like(inputs)
         return self.encoder(inputs, self.graph(batch))
 
-    def forward(self, batch) -> torch.Tensor:
+    def forward(self, batch, noise: torch.Tensor | None = None) -> torch.Tensor:
         """A :class:`~gripdem.data.batch.WindowBatch` -> ``(B, N, horizon, C)``: normalised
         per-step deltas (paper frame) or the per-step deviation from constant velocity in units
-        of the velocity change (exact frame, ``C = 3``)."""
+        of the velocity change (exact frame, ``C = 3``). An ensemble model draws one member:
+        its latent noise ``(B, N, noise_channels)`` is ``noise`` or, when None, drawn from
+        :attr:`noise_generator` (zeros give the noise-free network)."""
         mode = self.hparams.decoder_mode
-        features = self._encode(batch)
+        features = self._encode(batch, noise)
         state = modes.initial_state(mode, self.encoding, batch.last_positions, batch.inputs)
         base = modes.residual_base(
             mode, self.hparams.residual_base, self.encoding, batch.inputs, self.normalizer

@@ -31,7 +31,14 @@ class TrainingSteps:
         return ((steps - v0) / self.change_std).to(dtype)
 
     def _loss(self, pred: torch.Tensor, batch) -> torch.Tensor:
+        """The training loss of predictions ``(B, N, f, C)``, or, with ``model.loss=crps``, of
+        ensemble members ``(M, B, N, f, C)``."""
         mode = self.hparams.decoder_mode
+        if self.hparams.loss == "crps":
+            members = pred if pred.ndim == 5 else pred[None]
+            return modes.exact_crps_loss(mode, members, self.true_deviation(batch))
+        if pred.ndim == 5:  # an ensemble scored on squared error: its mean
+            pred = pred.mean(dim=0)
         if self.exact:
             return modes.exact_loss(mode, pred, self.true_deviation(batch))
         pred, true = modes.loss_terms(mode, self.hparams.vct_shift, pred, batch.target_deltas)
@@ -47,7 +54,10 @@ class TrainingSteps:
         sigma = float(self.hparams.history_noise)
         if sigma > 0:
             batch = noisy_history(batch, sigma, self.diameter, self.boundary, self.normalizer)
-        loss = self._loss(self(batch), batch)
+        if self.hparams.loss == "crps":
+            loss = self._loss(self.forward_members(batch, self.hparams.members), batch)
+        else:
+            loss = self._loss(self(batch), batch)
         if not torch.isfinite(loss):
             raise FloatingPointError(
                 f"non-finite training loss ({loss.item()}) at global step {self.global_step} "

@@ -15,15 +15,22 @@ opens those gaps. This encoder gives every pair what it needs to learn that:
 - node inputs: the particle's own flow-relative displacement history (and the x-position
   features where the driving depends on x, the periodic scene's body force);
 - ``rounds`` of message passing with learned message, edge-update and node-update MLPs
-  (residual), sums over neighbours.
+  (residual), sums over neighbours;
+- for an ensemble member (``noise_channels > 0``), a per-particle latent noise vector
+  ``z ~ N(0, I)`` whose learned linear embedding is added to the node latents before every
+  round and to the output: the noise conditions every message a particle sends and receives,
+  so one forward pass draws one sample of the whole configuration's next frames. Per-node
+  work only (no edge term changes): a member costs what the deterministic forward costs. With
+  ``z = 0`` the encoder is exactly the deterministic one with the same weights.
 
 Everything is relative (pair vectors, relative motion), so the encoder is permutation-
 equivariant, works for any particle count, and is invariant to an LE-consistent shift of the
 whole configuration (without the x-position features, which the periodic drive needs).
 
 Shapes: ``history (batch, particles, K, 3)`` in velocity units, ``static (batch, particles, S)``,
-a :class:`ContactGraph` over ``batch * particles`` nodes; output
-``(batch, particles, 1, channels)`` (one time step for the seq2seq GRU block).
+a :class:`ContactGraph` over ``batch * particles`` nodes, optional ``noise (batch, particles,
+noise_channels)``; output ``(batch, particles, 1, channels)`` (one time step for the seq2seq
+GRU block).
 """
 
 from __future__ import annotations
@@ -106,6 +113,8 @@ class InteractionEncoder(nn.Module):
         edge_history: relative-motion steps per pair (the last ones, <= K).
         edge_updates: update the edge latents between rounds (False: every round reads the
             encoded edge inputs; ~40 % fewer pair evaluations).
+        noise_channels: size of the per-particle latent noise of an ensemble member (0: a
+            deterministic encoder).
     """
 
     def __init__(
@@ -116,6 +125,7 @@ class InteractionEncoder(nn.Module):
         rounds: int = 3,
         edge_history: int = 3,
         edge_updates: bool = True,
+        noise_channels: int = 0,
     ):
         super().__init__()
         if rounds < 1:
@@ -134,6 +144,15 @@ class InteractionEncoder(nn.Module):
         )
         self.node_update = nn.ModuleList(
             mlp(2 * channels, channels, channels) for _ in range(rounds)
+        )
+        self.noise_channels = int(noise_channels)
+        if self.noise_channels < 0:
+            raise ValueError(f"noise_channels must be >= 0, got {noise_channels}")
+        # one embedding before every round and one for the output (default init: the members
+        # differ from the first step, so the CRPS's spread term has a gradient)
+        self.noise_embedding = nn.ModuleList(
+            nn.Linear(self.noise_channels, c, bias=False)
+            for _ in range(rounds + 1 if self.noise_channels else 0)
         )
 
     @property
@@ -163,9 +182,14 @@ class InteractionEncoder(nn.Module):
         )
 
     def forward(
-        self, history: torch.Tensor, static: torch.Tensor | None, graph: ContactGraph
+        self,
+        history: torch.Tensor,
+        static: torch.Tensor | None,
+        graph: ContactGraph,
+        noise: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """history ``(B, N, K, 3)``, static ``(B, N, S)`` or None -> ``(B, N, 1, channels)``."""
+        """history ``(B, N, K, 3)``, static ``(B, N, S)`` or None, noise ``(B, N, Z)`` or None
+        (zero) -> ``(B, N, 1, channels)``."""
         b, n, k, _ = history.shape
         if k != self.history_len:
             raise ValueError(f"encoder built for history {self.history_len}, got {k}")
@@ -179,13 +203,32 @@ class InteractionEncoder(nn.Module):
             node = torch.cat([node, static.reshape(b * n, -1).to(node.dtype)], dim=-1)
         h = self.node_in(node)
         e = self.edge_in(self.edge_inputs(flat, graph))
+        z = self._noise(noise, b, n)
         index = graph.edge_index
         for r, (message, node_update) in enumerate(
             zip(self.message, self.node_update, strict=True)
         ):
+            if z is not None:
+                h = h + self.noise_embedding[r](z)
             msg = message(h, e, index)
             if r < len(self.edge_update):
                 e = e + self.edge_update[r](h, msg, index)
             incoming = torch.zeros_like(h).index_add_(0, index[0], msg)
             h = h + node_update(torch.cat([h, incoming], dim=-1))
+        if z is not None:
+            h = h + self.noise_embedding[-1](z)
         return h.reshape(b, n, 1, -1)
+
+    def _noise(self, noise: torch.Tensor | None, b: int, n: int) -> torch.Tensor | None:
+        """The noise as ``(B * N, Z)`` in the latents' dtype, or None (zero noise or a
+        deterministic encoder)."""
+        if noise is None:
+            return None
+        if not self.noise_channels:
+            raise ValueError("this encoder is deterministic (noise_channels=0): it takes no noise")
+        if tuple(noise.shape) != (b, n, self.noise_channels):
+            raise ValueError(
+                f"noise must be (batch, particles, noise_channels) = ({b}, {n}, "
+                f"{self.noise_channels}), got {tuple(noise.shape)}"
+            )
+        return noise.reshape(b * n, self.noise_channels).to(self.node_in[0].weight.dtype)

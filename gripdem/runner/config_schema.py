@@ -100,6 +100,7 @@ class EncoderSchema:
     edge_history: int = 3
     edge_updates: bool = True
     position_features: PositionFeatures = PositionFeatures.auto
+    noise_channels: int = 0
 
 
 @dataclass
@@ -125,6 +126,10 @@ class ModelSchema:
     decoder: str = "gru"
     zero_mean: bool = False
     history_noise: float = 0.0
+    loss: str = "mse"
+    members: int = 2
+    eval_members: int = 8
+    monitor: str = "val/rmse"
 
 
 @dataclass

@@ -123,6 +123,9 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         decoder=model_cfg["decoder"],
         zero_mean=model_cfg["zero_mean"],
         history_noise=model_cfg["history_noise"],
+        loss=model_cfg["loss"],
+        members=model_cfg["members"],
+        eval_members=model_cfg["eval_members"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),
@@ -199,19 +202,39 @@ def build_trainer(cfg: DictConfig, out_dir: Path, logger: TensorBoardLogger) -> 
 
 
 def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) -> str:
-    """Model vs baselines on the test windows, as a Markdown table."""
+    """Model vs baselines on the test windows, as a Markdown table: RMSE, and the CRPS (a
+    point forecast's is its mean absolute error; an ensemble's, its members' fair CRPS, with
+    its mean's RMSE, a member's and the spread/skill ratio below)."""
     label = "test (IN-SAMPLE: trained on these windows)" if in_sample else "test (out of sample)"
-    rows = [f"| {label} | RMSE (m) | RMSE / d | model / this |", "|---|---|---|---|"]
+    rows = [
+        f"| {label} | RMSE (m) | RMSE / d | model / this | CRPS / d |",
+        "|---|---|---|---|---|",
+    ]
     model = metrics.get("test/rmse", math.nan)
-    names = [("model", "test/rmse")]
+    names = [("model", "test/rmse", "test/crps")]
+    if "test/spread_skill" in metrics:
+        names = [("model (ensemble mean; CRPS of the members)", "test/rmse", "test/crps")]
     if "before/test/rmse" in metrics:  # fine-tuned: the source model as it was, same windows
         tuned = "model (fine-tuned)"
         if metrics.get("finetune/kept_start"):
             tuned = "model (the start: training did not beat it on validation)"
-        names = [(tuned, "test/rmse"), ("before fine-tuning", "before/test/rmse")]
-    for name, key in names + [(b, f"test/rmse_{b}") for b in BASELINES]:
+        names = [(tuned, "test/rmse", "test/crps"), ("before fine-tuning", "before/test/rmse", "")]
+    names += [(b, f"test/rmse_{b}", f"test/crps_{b}") for b in BASELINES]
+    for name, key, crps in names:
         value = metrics.get(key, math.nan)
-        rows.append(f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} |")
+        score = metrics.get(crps, math.nan) / diameter
+        rows.append(
+            f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} | {score:.4g} |"
+        )
+    if "test/spread_skill" in metrics:
+        member = metrics.get("test/rmse_member", math.nan)
+        rows.append(
+            f"\nensemble of {metrics.get('test/members', math.nan):.0f} members: one member's "
+            f"RMSE / d {member / diameter:.4g}, spread/skill {metrics['test/spread_skill']:.3f} "
+            "(1: calibrated), rank histogram's bins "
+            f"{metrics['test/rank_min_over_uniform']:.2f}-{metrics['test/rank_max_over_uniform']:.2f}"
+            " of uniform"
+        )
     return "\n".join(rows)
 
 

@@ -12,6 +12,9 @@ from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.models.baselines import BASELINES
 
+#: the comparison set that holds an ensemble's first member
+ENSEMBLE_MEMBER = "member_0"
+
 
 def plain(node: Any) -> Any:
     """A config node as plain Python values (enums as their names)."""
@@ -21,7 +24,13 @@ def plain(node: Any) -> Any:
 
 
 def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict) -> Predictions:
+    """The test results as a predictions file's content. An ensemble's ``pred`` is its mean;
+    its first member rides beside the baselines as the set ``member_0`` (a sample: what moves
+    like the DEM's particles), so the physics report and the figures show both."""
     meta = dm.meta
+    sets = {name: results[name].numpy() for name in BASELINES}
+    if results.get("members") is not None:
+        sets[ENSEMBLE_MEMBER] = results["members"][0].numpy()
     return Predictions(
         pred_positions=results["pred"].numpy(),
         true_positions=results["true"].numpy(),
@@ -34,7 +43,7 @@ def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict
         protocol=str(dm.plan.protocol),
         sim_index=results["sim_index"].numpy(),
         window_start=results["window_start"].numpy(),
-        baselines={name: results[name].numpy() for name in BASELINES},
+        baselines=sets,
         body_force_amplitude=meta.body_force_amplitude,
         info=info,
     )

@@ -240,3 +240,43 @@ def test_in_sample_check_reads_the_run_metrics(tmp_path, le_file, le_checkpoint)
             assert json.loads(h5.attrs["run"])["sims"] == [1]
     finally:
         metrics.unlink()
+
+
+@pytest.fixture(scope="module")
+def le_ensemble_checkpoint(tmp_path_factory, le_file, make_checkpoint):
+    """The untrained ensemble model (model=ensemble) on ``le_file``."""
+    out = tmp_path_factory.mktemp("le_ensemble_run")
+    return make_checkpoint(le_file, out, ["scene=lebc", "model=ensemble"])
+
+
+def test_predict_rolls_out_ensemble_members(tmp_path, capsys, le_file, le_ensemble_checkpoint):
+    out = tmp_path / "pred.h5"
+    args = ("--start", 25, "--frames", 12, "--sims", 0, 2, "--members", 3, "--seed", 5)
+    args += ("--no-correction",)
+    assert run(le_ensemble_checkpoint, le_file, out, *args) == 0
+    printed = capsys.readouterr().out
+    assert "ensemble of 3: spread/skill" in printed and "CRPS / d" in printed
+    assert "pred_ensemble.h5" in printed
+    trajectory = read_dataset(tmp_path / "pred_trajectory.h5")
+    assert trajectory.positions.shape == (6, 6 + 12, 24, 3)  # sims x members rows
+    assert trajectory.provenance["parameters"]["members"] == 3
+    truth = read_dataset(le_file)
+    for row, sim in enumerate([0, 0, 0, 2, 2, 2]):
+        np.testing.assert_array_equal(trajectory.positions[row, :6], truth.positions[sim, 25:31])
+    report = json.loads((tmp_path / "pred_rollout.json").read_text())
+    assert report["ensemble"] is True and report["members"] == 3 and report["seed"] == 5
+    assert len(report["member_rmse_over_d"]) == 3 and len(report["spread_skill"]) == 9
+    assert len(report["rank_histogram_frames_1_100"]) == 4
+    assert set(report["crps_over_d"]) == set(report["rmse_over_d"])
+    with h5py.File(tmp_path / "pred_ensemble.h5", "r") as h5:
+        assert h5["mean_positions"].shape == (2, 18, 24, 3) and h5["spread"].shape == (2, 18, 24)
+        assert h5.attrs["members"] == 3
+    # the untrained members are constant velocity: their mean is CV's prediction
+    p = read_predictions(out)
+    assert np.abs(p.pred_positions - p.baselines["constant_velocity"]).max() < 1e-15
+
+
+def test_a_deterministic_model_has_no_members(tmp_path, capsys, le_file, le_checkpoint):
+    assert run(le_checkpoint, le_file, tmp_path / "p.h5", "--members", 2) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "deterministic" in err[0] and "--members 1" in err[0]

@@ -20,6 +20,7 @@ GROUPS = {
     "split": ["190-10", "180-20", "150-50", "100-100", "custom"],
     "model": [
         "interaction",
+        "ensemble",
         "grip",
         "pct",
         "vct",

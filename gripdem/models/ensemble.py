@@ -1,0 +1,59 @@
+"""Ensemble members of a trajectory model: a model whose encoder draws per-particle latent noise
+(``model.encoder.noise_channels > 0``, :mod:`gripdem.nn.interaction`) is an *ensemble* model;
+every forward pass is one member, a sample of the next frames. Trained on the fair CRPS over
+``model.members`` members per window (``model.loss=crps``,
+:func:`gripdem.models.decoder_modes.exact_crps_loss`), scored in validation and test on
+``model.eval_members`` members (:mod:`gripdem.evaluation.ensemble_scores`).
+
+:class:`EnsembleMembers` is a mixin of :class:`gripdem.models.module.TrajectoryModule`: it reads
+the module's ``encoder``, ``exact``, ``change_std`` and its ``forward``.
+"""
+
+from __future__ import annotations
+
+import torch
+
+LOSSES = ("mse", "crps")
+
+
+class EnsembleMembers:
+    """Noise draws and members of an ensemble model (see the module doc)."""
+
+    #: the source of the members' noise (None: torch's global generator); set by the rollout
+    #: from its seed
+    noise_generator: torch.Generator | None = None
+
+    def _check_ensemble(self, loss: str, members: int, eval_members: int) -> None:
+        if loss not in LOSSES:
+            raise ValueError(f"model.loss must be one of {LOSSES}, got {loss!r}")
+        if loss == "crps" and not self.exact:
+            raise ValueError("model.loss=crps needs the exact frame (model.encoding=unwrapped)")
+        if int(members) < 1 or int(eval_members) < 1:
+            raise ValueError(
+                f"model.members and model.eval_members must be >= 1, got {members} and "
+                f"{eval_members}"
+            )
+        if self.is_ensemble and loss == "crps" and int(members) < 2:
+            raise ValueError(
+                "model.loss=crps trains an ensemble on at least 2 members per window (the fair "
+                f"CRPS's spread term needs a pair), got model.members={members}"
+            )
+
+    @property
+    def is_ensemble(self) -> bool:
+        """Whether a forward pass draws latent noise (one ensemble member per pass)."""
+        return int(getattr(self.encoder, "noise_channels", 0)) > 0
+
+    def sample_noise(self, batch_size: int, particles: int) -> torch.Tensor:
+        """Standard normal latent noise ``(batch, particles, noise_channels)`` from
+        :attr:`noise_generator`."""
+        gen = self.noise_generator
+        device = gen.device if gen is not None else self.change_std.device
+        shape = (batch_size, particles, self.encoder.noise_channels)
+        return torch.randn(shape, generator=gen, device=device).to(self.change_std.device)
+
+    def forward_members(self, batch, members: int) -> torch.Tensor:
+        """``members`` forward passes with independent noise: ``(M, B, N, horizon, C)`` (a
+        deterministic model gives one)."""
+        m = int(members) if self.is_ensemble else 1
+        return torch.stack([self(batch) for _ in range(m)])

@@ -148,6 +148,41 @@ def noise_floor(scene: str, preset: str, frames: int, block: int) -> dict:
     return block_statistics(b, a, times, meta.boundary, meta.diameter, block=block)
 
 
+def member_cost(checkpoint, reference, scene, args, preset, frames: int = 100, repeats: int = 3):
+    """ms per member and frame over ``frames`` frames from the truth's start, side by side and
+    interleaved (fastest of ``repeats``): the reference model (one member), the ensemble with
+    one member, and the ensemble with ``--members`` members advanced together."""
+    k = None
+    models = {}
+    for name, path in (("reference", reference), ("ensemble", checkpoint)):
+        models[name] = load_model(path, read_meta(scene_dataset(scene, preset)))
+        k = int(models[name].hparams.history_len)
+    truth, times = read_sim(truth_dataset(scene, preset, k + 1 + args.frames), 0, k + 1)
+    meta = read_meta(truth_dataset(scene, preset, k + 1 + args.frames))
+    cases = {
+        "reference, 1 member": (models["reference"], 1),
+        "ensemble, 1 member": (models["ensemble"], 1),
+        f"ensemble, {args.members} members together": (models["ensemble"], args.members),
+    }
+    best = dict.fromkeys(cases, float("inf"))
+    for _ in range(repeats):
+        for name, (model, members) in cases.items():
+            started = time.perf_counter()
+            rollout(
+                model,
+                meta,
+                truth[None],
+                times[None],
+                frames,
+                check_overlap=False,
+                members=members,
+                seed=args.seed,
+            )
+            seconds = (time.perf_counter() - started) / (frames * members)
+            best[name] = min(best[name], 1e3 * seconds)
+    return best
+
+
 def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     model = load_model(checkpoint, read_meta(scene_dataset(scene, preset)))
     k = int(model.hparams.history_len)
@@ -278,6 +313,10 @@ def main(argv: list[str] | None = None) -> dict:
         if scene in references:
             scenes[f"{scene} (reference)"] = evaluate_scene(scene, references[scene], args, preset)
         scenes[scene] = evaluate_scene(scene, checkpoint, args, preset, args.members)
+        if scene in references and args.members > 1:
+            scenes[scene]["member_cost_ms"] = member_cost(
+                checkpoint, references[scene], scene, args, preset, min(100, args.frames)
+            )
     report = {
         "machine": machine_line(),
         "args": {k: str(v) for k, v in vars(args).items()},

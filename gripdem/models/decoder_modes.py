@@ -185,16 +185,23 @@ def exact_loss(mode: str, deviation: torch.Tensor, true_deviation: torch.Tensor)
     return torch.mean((deviation - true_deviation) ** 2) / cv.clamp_min(1e-12)
 
 
-def exact_crps_loss(mode: str, members: torch.Tensor, true_deviation: torch.Tensor) -> torch.Tensor:
+def exact_crps_loss(
+    mode: str, members: torch.Tensor, true_deviation: torch.Tensor, per_step: bool = False
+) -> torch.Tensor:
     """Exact frame, an ensemble: the fair CRPS (:func:`~gripdem.evaluation.ensemble_scores.
     fair_crps`) of the members ``(M, B, N, f, 3)`` per coordinate of the positions over the
     horizon (grip, pct: cumulative deviations; vct: per-step displacements), over CV's mean
     absolute error (the CRPS of CV, a point forecast), so an untrained model scores 1 as it does
-    under :func:`exact_loss`."""
+    under :func:`exact_loss`. ``per_step``: over CV's error at each horizon step, so every step
+    weighs the same (by default the late steps, whose errors are largest, dominate)."""
     if mode != "vct":
         members, true_deviation = torch.cumsum(members, dim=3), torch.cumsum(true_deviation, dim=2)
+    crps = fair_crps(members, true_deviation)  # (B, N, f, 3)
+    if per_step:
+        cv = true_deviation.abs().mean(dim=(0, 1, 3)).detach()  # (f,)
+        return torch.mean(crps.mean(dim=(0, 1, 3)) / cv.clamp_min(1e-12))
     cv = torch.mean(true_deviation.abs()).detach()
-    return torch.mean(fair_crps(members, true_deviation)) / cv.clamp_min(1e-12)
+    return torch.mean(crps) / cv.clamp_min(1e-12)
 
 
 # --------------------------------------------------------------------------------------------

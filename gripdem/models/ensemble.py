@@ -14,6 +14,7 @@ from __future__ import annotations
 import torch
 
 LOSSES = ("mse", "crps")
+LOSS_WEIGHTINGS = ("horizon", "step")
 
 
 class EnsembleMembers:
@@ -23,9 +24,15 @@ class EnsembleMembers:
     #: from its seed
     noise_generator: torch.Generator | None = None
 
-    def _check_ensemble(self, loss: str, members: int, eval_members: int) -> None:
+    def _check_ensemble(self, loss: str, members: int, eval_members: int, weighting: str) -> None:
         if loss not in LOSSES:
             raise ValueError(f"model.loss must be one of {LOSSES}, got {loss!r}")
+        if weighting not in LOSS_WEIGHTINGS:
+            raise ValueError(
+                f"model.loss_weighting must be one of {LOSS_WEIGHTINGS}, got {weighting!r}"
+            )
+        if weighting == "step" and loss != "crps":
+            raise ValueError("model.loss_weighting=step weighs the CRPS: it needs model.loss=crps")
         if loss == "crps" and not self.exact:
             raise ValueError("model.loss=crps needs the exact frame (model.encoding=unwrapped)")
         if int(members) < 1 or int(eval_members) < 1:

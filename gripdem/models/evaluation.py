@@ -153,6 +153,8 @@ class RolloutEvaluation:
         ratio per step, a member's RMSE and the rank histogram's extreme bins over uniform."""
         box, d = self.boundary.box, self.diameter
         metrics: dict[str, float] = {}
+        curves: dict[str, Any] = {"crps_over_d": {}}
+        data["scores"] = curves
         members = data.get("members")
         forecasts = {"crps": data["pred"] if members is None else members}
         forecasts.update({f"crps_{name}": data[name] for name in self.baselines})
@@ -160,6 +162,9 @@ class RolloutEvaluation:
             res = position_residuals(forecast, data["true"], box, data["offsets"])
             per_step = crps_per_step(res)
             metrics[f"{stage}/{key}"] = float(per_step.mean())
+            curves["crps_over_d"][key.removeprefix("crps_") if key != "crps" else "model"] = (
+                per_step / d
+            ).tolist()
             if key == "crps":
                 metrics[f"{stage}/crps_over_d"] = float(per_step.mean()) / d
                 for step, value in enumerate(per_step / d, start=1):
@@ -177,7 +182,9 @@ class RolloutEvaluation:
         spread = deviation.pow(2).sum(-1).mean(dim=(0, 1, 3)).sqrt() / d  # (f,)
         metrics[f"{stage}/spread_over_d"] = float(spread.mean())
         metrics[f"{stage}/spread_last_step_over_d"] = float(spread[-1])
-        top, bottom = rank_flatness(rank_histogram(res))
+        histogram = rank_histogram(res)
+        curves.update(spread_skill=ratio.tolist(), rank_histogram=histogram.tolist())
+        top, bottom = rank_flatness(histogram)
         metrics[f"{stage}/rank_max_over_uniform"] = top
         metrics[f"{stage}/rank_min_over_uniform"] = bottom
         return metrics

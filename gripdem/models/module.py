@@ -137,6 +137,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             members per window: an ensemble learns the spread too; :mod:`gripdem.models.ensemble`).
         members, eval_members: ensemble members per window in training and in validation/test
             (``encoder.noise_channels > 0``: one forward pass draws one member).
+        loss_weighting: ``horizon`` (the CRPS over CV's over the whole horizon) | ``step``
+            (over CV's at each step: every step weighs the same).
     """
 
     def __init__(
@@ -170,6 +172,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         loss: str = "mse",
         members: int = 2,
         eval_members: int = 8,
+        loss_weighting: str = "horizon",
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)
@@ -218,7 +221,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             raise ValueError(
                 "model.zero_mean=true needs the exact frame (model.encoding=unwrapped)"
             )
-        self._check_ensemble(loss, members, eval_members)
+        self._check_ensemble(loss, members, eval_members, loss_weighting)
         self._eval_store: dict[str, list] = {}
         self.accuracy_curve: list[tuple[float, int, float]] = []
         self._fit_started: float | None = None

@@ -36,7 +36,8 @@ class TrainingSteps:
         mode = self.hparams.decoder_mode
         if self.hparams.loss == "crps":
             members = pred if pred.ndim == 5 else pred[None]
-            return modes.exact_crps_loss(mode, members, self.true_deviation(batch))
+            per_step = self.hparams.get("loss_weighting", "horizon") == "step"
+            return modes.exact_crps_loss(mode, members, self.true_deviation(batch), per_step)
         if pred.ndim == 5:  # an ensemble scored on squared error: its mean
             pred = pred.mean(dim=0)
         if self.exact:

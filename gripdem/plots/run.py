@@ -37,6 +37,7 @@ from gripdem.evaluation.figure_data import (
 )
 from gripdem.plots.common import new_figure, save_figure
 from gripdem.plots.physics import plot_physics
+from gripdem.plots.scores import plot_scores
 
 FIGURES = ("rmse_per_step", "crossers", "velocity_profile", "parity_z", "pair_distances")
 
@@ -193,10 +194,11 @@ def plot_pair_distances(data: PairHistogram, title: str, horizon: int) -> Figure
     return fig
 
 
-def run_figures(data: RunFigureData, physics: Any = None) -> dict[str, Figure]:
-    """All figures of :data:`FIGURES` for one run, by name, and ``physics`` (truth, model and
+def run_figures(data: RunFigureData, physics: Any = None, scores=None) -> dict[str, Figure]:
+    """All figures of :data:`FIGURES` for one run, by name, ``physics`` (truth, model and
     baselines side by side) when a :class:`~gripdem.evaluation.physics_report.PhysicsReport`
-    is given."""
+    is given, and ``scores`` (CRPS, spread/skill, rank histogram: :mod:`gripdem.plots.scores`)
+    when the test's score curves are."""
     figures = {
         "rmse_per_step": plot_rmse_per_step(data.rmse, data.title, data.horizon),
         "crossers": plot_crossers(data.crossers, data.title, data.model_name),
@@ -206,6 +208,8 @@ def run_figures(data: RunFigureData, physics: Any = None) -> dict[str, Figure]:
     }
     if physics is not None:
         figures["physics"] = plot_physics(physics, data.title, data.model_name)
+    if scores:
+        figures["scores"] = plot_scores(scores, data.title, data.model_name)
     return figures
 
 
@@ -216,6 +220,7 @@ def make_run_figures(
     step: int = 0,
     tag_prefix: str = "figures/",
     physics: Any = None,
+    scores: dict | None = None,
 ) -> dict[str, Path]:
     """Draw every figure of a run, write ``out_dir/<name>.png`` and return ``{name: path}``.
 
@@ -223,7 +228,7 @@ def make_run_figures(
     each figure is then also logged as image ``<tag_prefix><name>`` at ``step``."""
     out_dir = Path(out_dir)
     paths: dict[str, Path] = {}
-    for name, fig in run_figures(data, physics).items():
+    for name, fig in run_figures(data, physics, scores).items():
         path = out_dir / f"{name}.png"
         image = save_figure(fig, path)
         if writer is not None:

@@ -129,6 +129,7 @@ class ModelSchema:
     loss: str = "mse"
     members: int = 2
     eval_members: int = 8
+    loss_weighting: str = "horizon"
     monitor: str = "val/rmse"
 
 

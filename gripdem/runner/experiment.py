@@ -126,6 +126,7 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         loss=model_cfg["loss"],
         members=model_cfg["members"],
         eval_members=model_cfg["eval_members"],
+        loss_weighting=model_cfg["loss_weighting"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),
@@ -346,7 +347,10 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         "hparams": hp,
         "data": dm.summary(),
     }
-    write_outputs(cfg, out_dir, predictions, logger, trainer.global_step, physics_report)
+    report["scores"] = results.get("scores")  # CRPS, spread/skill, rank histogram curves
+    write_outputs(
+        cfg, out_dir, predictions, logger, trainer.global_step, physics_report, report["scores"]
+    )
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
     logger.finalize("success")
     title = f"{cfg.scene.name} / {cfg.split.name} / {cfg.model.name} (seed {cfg.seed})"

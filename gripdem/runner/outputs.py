@@ -64,10 +64,16 @@ def physics_metrics(predictions: Predictions) -> tuple[dict[str, float], Any]:
 
 
 def write_outputs(
-    cfg, out_dir: Path, predictions: Predictions, logger, step: int, physics_report=None
+    cfg,
+    out_dir: Path,
+    predictions: Predictions,
+    logger,
+    step: int,
+    physics_report=None,
+    scores: dict | None = None,
 ) -> None:
-    """predictions.h5, figures (PNG + TensorBoard images; the physics figure from the report)
-    and XYZ trajectories."""
+    """predictions.h5, figures (PNG + TensorBoard images; the physics figure from the report,
+    the scores figure from the test's score curves) and XYZ trajectories."""
     outputs = plain(cfg.outputs)
     if outputs["predictions"]:
         write_predictions(out_dir / "predictions.h5", predictions, overwrite=True)
@@ -81,6 +87,7 @@ def write_outputs(
             writer=logger.experiment,
             step=step,
             physics=physics_report,
+            scores=scores,
         )
     if outputs["export_xyz"]:
         from gripdem.formats.export import export_extxyz

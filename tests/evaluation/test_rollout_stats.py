@@ -76,3 +76,27 @@ def test_exact_affine_shear_has_the_imposed_slope_and_no_non_affine_motion(drift
             assert np.isnan(value) or value < 1e-18
         assert row["truth/rms_non_affine_over_d"] < 1e-9
         assert row["step_w1"] == 0.0 or np.isnan(row["step_w1"])
+
+
+def test_diffusion_coefficients_of_sheared_random_walks():
+    """Random walks with step variances (sx^2, sy^2, sz^2) per frame in an exact shear flow
+    (each z-step is the flow at the step's middle x plus the walk's): the non-affine MSD grows as
+    L s^2 per axis, so D = s^2 / 2 (d^2 per frame), the flow removed with the truth's profile."""
+    from gripdem.evaluation.rollout_stats import diffusion_coefficients
+
+    frames, rate = 1200, 0.01
+    boundary = Boundary(BOX, LeesEdwards(rate, 1, 0.0))
+    times = 100.0 + np.arange(frames + 1)
+    rng = np.random.default_rng(0)
+    sigma = np.array([0.02, 0.01, 0.03])
+    noise = rng.normal(size=(frames, len(lattice()), 3)) * sigma
+    cont = [lattice()]
+    for step in noise:
+        x_mid = cont[-1][:, 0] + 0.5 * step[:, 0]
+        cont.append(cont[-1] + step + np.stack([0 * x_mid, 0 * x_mid, rate * x_mid], -1))
+    offsets = boundary.offset(times)
+    moved = np.stack([wrap_positions(c, BOX, o) for c, o in zip(cont, offsets, strict=True)])
+    measured = diffusion_coefficients(moved, moved, times, boundary, D)
+    np.testing.assert_allclose(measured, sigma**2 / 2, rtol=0.15)
+    with pytest.raises(ValueError, match="needs 1000 frames"):
+        diffusion_coefficients(moved[:500], moved[:500], times[:500], boundary, D)

@@ -142,6 +142,11 @@ def test_crps_loss_starts_at_one_and_needs_two_members(tiny_pbc_path):
     batch = next(iter(dm.train_dataloader()))
     loss = model._loss(model.forward_members(batch, 2), batch)
     assert float(loss.detach()) == pytest.approx(1.0, abs=1e-6)  # untrained: every member is CV
+    stepwise = module(dm, loss_weighting="step").train()
+    loss = stepwise._loss(stepwise.forward_members(batch, 2), batch)
+    assert float(loss.detach()) == pytest.approx(1.0, abs=1e-6)  # each step's CV error is 1
+    with pytest.raises(ValueError, match="loss_weighting=step weighs the CRPS"):
+        module(dm, noise_channels=0, loss_weighting="step")
     with pytest.raises(ValueError, match="at least 2 members"):
         module(dm, members=1)
     with pytest.raises(ValueError, match="model.loss must be one of"):
@@ -167,3 +172,28 @@ def test_crps_training_learns_a_spread(tiny_lebc_path):
         spread = model.forward_members(batch, 4).std(dim=0).mean()
     assert min(losses[-20:]) < 0.8 * losses[0]
     assert float(spread) > 1e-3
+
+
+def test_the_scores_figure_of_an_ensemble_and_of_a_point_forecast(tmp_path, tiny_pbc_path):
+    """Every run's scores figure: CRPS per step; an ensemble adds spread/skill and the rank
+    histogram."""
+    from gripdem.plots.common import save_figure
+    from gripdem.plots.scores import plot_scores
+
+    dm = datamodule(tiny_pbc_path)
+    for noise, panels in ((4, 3), (0, 1)):
+        model = perturb(module(dm, noise_channels=noise)).eval()
+        for batch in dm.test_dataloader():
+            with torch.no_grad():
+                model._evaluate(batch, "test")
+        data = model.results("test")
+        scores = data["scores"]
+        assert set(scores["crps_over_d"]) == {"model", *model.baselines}
+        assert ("spread_skill" in scores) == (panels == 3)
+        fig = plot_scores(scores, "title")
+        assert len(fig.axes) == panels
+        save_figure(fig, tmp_path / f"scores_{noise}.png")
+        if noise:
+            assert data["metrics"]["test/members"] == 8
+            assert len(scores["rank_histogram"]) == 9
+            assert sum(scores["rank_histogram"]) == pytest.approx(1.0)

@@ -60,6 +60,7 @@ ENCODER_OPTIONS = {
         "edge_updates",
         "position_features",
         "noise_channels",
+        "noise_into",
     ),
 }
 LR_SCHEDULES = ("constant", "cosine")

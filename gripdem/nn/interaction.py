@@ -47,6 +47,8 @@ COHESION_GAP_SCALE = 0.1
 #: smallest gap resolved by the signed-log transform (contact overlaps are ~1e-5 d)
 LOG_GAP_FLOOR = 1e-5
 LOG_GAP_RANGE = math.log1p(1e-1 / LOG_GAP_FLOOR)
+#: where an ensemble member's latent noise enters (see InteractionEncoder)
+NOISE_INTO = ("rounds", "input", "head")
 
 
 @dataclass
@@ -115,6 +117,9 @@ class InteractionEncoder(nn.Module):
             encoded edge inputs; ~40 % fewer pair evaluations).
         noise_channels: size of the per-particle latent noise of an ensemble member (0: a
             deterministic encoder).
+        noise_into: where the noise's embeddings are added to the node latents: ``rounds``
+            (before every round and to the output), ``input`` (before the first round only)
+            or ``head`` (to the output only: the message passing stays deterministic).
     """
 
     def __init__(
@@ -126,6 +131,7 @@ class InteractionEncoder(nn.Module):
         edge_history: int = 3,
         edge_updates: bool = True,
         noise_channels: int = 0,
+        noise_into: str = "rounds",
     ):
         super().__init__()
         if rounds < 1:
@@ -148,11 +154,16 @@ class InteractionEncoder(nn.Module):
         self.noise_channels = int(noise_channels)
         if self.noise_channels < 0:
             raise ValueError(f"noise_channels must be >= 0, got {noise_channels}")
-        # one embedding before every round and one for the output (default init: the members
-        # differ from the first step, so the CRPS's spread term has a gradient)
+        if noise_into not in NOISE_INTO:
+            raise ValueError(f"noise_into must be one of {NOISE_INTO}, got {noise_into!r}")
+        self.noise_into = noise_into
+        # the places (round index, `rounds`: the output) where an embedding of the noise is
+        # added; default init: the members differ from the first step, so the CRPS's spread
+        # term has a gradient
+        places = {"rounds": range(rounds + 1), "input": [0], "head": [rounds]}[noise_into]
+        self.noise_places = list(places) if self.noise_channels else []
         self.noise_embedding = nn.ModuleList(
-            nn.Linear(self.noise_channels, c, bias=False)
-            for _ in range(rounds + 1 if self.noise_channels else 0)
+            nn.Linear(self.noise_channels, c, bias=False) for _ in self.noise_places
         )
 
     @property
@@ -208,14 +219,14 @@ class InteractionEncoder(nn.Module):
         for r, (message, node_update) in enumerate(
             zip(self.message, self.node_update, strict=True)
         ):
-            if z is not None:
-                h = h + self.noise_embedding[r](z)
+            if z is not None and r in self.noise_places:
+                h = h + self.noise_embedding[self.noise_places.index(r)](z)
             msg = message(h, e, index)
             if r < len(self.edge_update):
                 e = e + self.edge_update[r](h, msg, index)
             incoming = torch.zeros_like(h).index_add_(0, index[0], msg)
             h = h + node_update(torch.cat([h, incoming], dim=-1))
-        if z is not None:
+        if z is not None and len(self.message) in self.noise_places:
             h = h + self.noise_embedding[-1](z)
         return h.reshape(b, n, 1, -1)
 

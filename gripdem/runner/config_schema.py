@@ -101,6 +101,7 @@ class EncoderSchema:
     edge_updates: bool = True
     position_features: PositionFeatures = PositionFeatures.auto
     noise_channels: int = 0
+    noise_into: str = "rounds"
 
 
 @dataclass

@@ -267,7 +267,9 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     model = build_model(cfg, dm)
     if source is not None:
         initialise(model, source, str(cfg.model.init_from))
-        start = validate_start(model, dm, accelerator(cfg))  # the score training must beat
+        checkpoint_cfg = (plain(cfg.callbacks) or {}).get("checkpoint", {})
+        monitor = checkpoint_cfg.get("monitor", "val/rmse")  # the score training must beat
+        start = validate_start(model, dm, accelerator(cfg), monitor)
     logger = AtomicTensorBoardLogger(**plain(cfg.logger))
     hp = hparams(cfg, dm)
     logger.log_hyperparams(hp, metrics={key: math.nan for key in HP_METRICS})
@@ -310,7 +312,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         as_is = load_model(cfg.model.init_from, dm.meta)  # its own AR prior, the data's scene
         before = test_model(as_is, dm, test_trainer, None, 0)
         metrics.update({f"before/{k}": v for k, v in before["metrics"].items()})
-        metrics["finetune/start_val_rmse"] = start.val_rmse
+        metrics[f"finetune/start_{start.monitor.replace('/', '_')}"] = start.val_rmse
         metrics["finetune/kept_start"] = float(kept_start)
     metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
     metrics["train_seconds"] = train_seconds

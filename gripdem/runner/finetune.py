@@ -10,6 +10,11 @@ forecast) is fitted on the new data as in any run. Before training, the source m
 tested on the same test windows, so the result table shows the model before and after
 fine-tuning beside the baselines.
 
+A deterministic source may start an ensemble run (``model=ensemble``, SPEC §13): the run's
+encoder adds the latent-noise path (its embeddings start at their initialisation, every other
+weight is the source's), so the members start around the source's mean forecast and training on
+the fair CRPS learns their spread (:func:`initialise`).
+
 Fine-tuning never loses what it started from: the source model, as initialised, is validated
 before the first step (:func:`validate_start`), and after training it stays the run's model
 unless training beat it on the validation windows (:func:`keep_start_unless_beaten`). Fine-tuning
@@ -31,6 +36,9 @@ from omegaconf import DictConfig, open_dict
 
 from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.models.module import encoder_options
+
+#: encoder options of the latent-noise path (an ensemble may start from a model without it)
+NOISE_OPTIONS = ("noise_channels", "noise_into")
 
 log = logging.getLogger(__name__)
 
@@ -61,8 +69,11 @@ def check_architecture(source_hp: dict[str, Any], run_hp: dict[str, Any], spec: 
     for key in ARCHITECTURE:
         a, b = source_hp.get(key), run_hp.get(key)
         if key == "encoder":  # the options that shape weights, defaults filled in
-            a = {k: v for k, v in encoder_options(a).items() if k != "position_features"}
-            b = {k: v for k, v in encoder_options(b).items() if k != "position_features"}
+            skip = {"position_features"}
+            if adds_noise(source_hp, run_hp):  # an ensemble from a deterministic model
+                skip |= set(NOISE_OPTIONS)
+            a = {k: v for k, v in encoder_options(a).items() if k not in skip}
+            b = {k: v for k, v in encoder_options(b).items() if k not in skip}
         if a != b:
             raise ValueError(
                 f"model.init_from={spec}: the source model has {key}={a!r}, this run builds "
@@ -71,10 +82,29 @@ def check_architecture(source_hp: dict[str, Any], run_hp: dict[str, Any], spec: 
             )
 
 
+def adds_noise(source_hp: dict[str, Any], run_hp: dict[str, Any]) -> bool:
+    """Whether the run is an ensemble started from a deterministic source."""
+    noise = [
+        int(encoder_options(hp.get("encoder")).get("noise_channels") or 0)
+        for hp in (source_hp, run_hp)
+    ]
+    return noise[0] == 0 and noise[1] > 0
+
+
 def initialise(model, source, spec: str) -> None:
-    """Copy the source's weights into the run's freshly built model (strict)."""
+    """Copy the source's weights into the run's freshly built model: every weight (strict),
+    but for an ensemble started from a deterministic source, whose noise embeddings keep their
+    initialisation."""
     check_architecture(dict(source.hparams), dict(model.hparams), spec)
-    model.load_state_dict(source.state_dict(), strict=True)
+    if not adds_noise(dict(source.hparams), dict(model.hparams)):
+        model.load_state_dict(source.state_dict(), strict=True)
+        return
+    missing, unexpected = model.load_state_dict(source.state_dict(), strict=False)
+    if unexpected or any(not k.startswith("encoder.noise_embedding.") for k in missing):
+        raise ValueError(
+            f"model.init_from={spec}: the source's weights do not fit this ensemble beyond its "
+            f"noise path (missing {missing}, unexpected {unexpected})"
+        )
 
 
 def apply_finetune_defaults(cfg: DictConfig) -> None:
@@ -95,16 +125,18 @@ def apply_finetune_defaults(cfg: DictConfig) -> None:
 
 
 class StartingPoint:
-    """The source model as the run initialised it: its weights and its validation RMSE."""
+    """The source model as the run initialised it: its weights and its validation score
+    (``monitor``: the metric the run's best checkpoint is chosen on, ``val/rmse`` by default)."""
 
-    def __init__(self, model, val_rmse: float):
+    def __init__(self, model, val_rmse: float, monitor: str = "val/rmse"):
         self.model = model
-        self.val_rmse = val_rmse
+        self.val_rmse = val_rmse  # the score on `monitor` (named for the default)
+        self.monitor = monitor
 
 
-def validate_start(model, dm, accelerator: str = "cpu") -> StartingPoint:
+def validate_start(model, dm, accelerator: str = "cpu", monitor: str = "val/rmse") -> StartingPoint:
     """Validate the initialised model on the run's validation windows before the first step
-    (the metric the best checkpoint is chosen on) and keep a copy of it."""
+    (``monitor``: the metric the best checkpoint is chosen on) and keep a copy of it."""
     trainer = L.Trainer(
         accelerator=accelerator,
         devices=1,
@@ -114,20 +146,22 @@ def validate_start(model, dm, accelerator: str = "cpu") -> StartingPoint:
         enable_model_summary=False,
     )
     results = trainer.validate(model, dm, verbose=False)
-    score = float(results[0]["val/rmse"]) if results and "val/rmse" in results[0] else math.nan
-    log.info("fine-tuning starts from val/rmse %.6g (the model as it is)", score)
-    return StartingPoint(copy.deepcopy(model), score)
+    score = float(results[0][monitor]) if results and monitor in results[0] else math.nan
+    log.info("fine-tuning starts from %s %.6g (the model as it is)", monitor, score)
+    return StartingPoint(copy.deepcopy(model), score, monitor)
 
 
 def keep_start_unless_beaten(trained, start: StartingPoint, best_score: float | None):
-    """``(model, kept_start)``: the trained model if its best validation RMSE is below the
-    starting model's, else the starting model (a tie keeps the start: nothing was gained)."""
+    """``(model, kept_start)``: the trained model if its best validation score (the start's
+    ``monitor``) is below the starting model's, else the starting model (a tie keeps the start:
+    nothing was gained)."""
     best = math.nan if best_score is None else float(best_score)
     if math.isnan(start.val_rmse) or (not math.isnan(best) and best < start.val_rmse):
         return trained, False
     log.warning(
-        "fine-tuning did not beat the starting model on validation (best val/rmse %.6g, "
+        "fine-tuning did not beat the starting model on validation (best %s %.6g, "
         "start %.6g): the run keeps the starting model",
+        start.monitor,
         best,
         start.val_rmse,
     )

@@ -197,3 +197,18 @@ def test_the_scores_figure_of_an_ensemble_and_of_a_point_forecast(tmp_path, tiny
             assert data["metrics"]["test/members"] == 8
             assert len(scores["rank_histogram"]) == 9
             assert sum(scores["rank_histogram"]) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("where", ["rounds", "input", "head"])
+def test_the_noise_enters_where_asked(tiny_pbc_path, where):
+    """One embedding per place; zero noise is the deterministic network wherever it enters."""
+    dm = datamodule(tiny_pbc_path)
+    encoder = {**ENCODER, "noise_into": where}
+    model = perturb(module(dm, encoder=encoder | {"noise_channels": 4})).eval()
+    assert len(model.encoder.noise_embedding) == {"rounds": 3, "input": 1, "head": 1}[where]
+    batch = next(iter(dm.test_dataloader()))
+    b, n = batch.inputs.shape[:2]
+    with torch.no_grad():
+        a, c = model(batch), model(batch)
+        quiet = model(batch, noise=torch.zeros(b, n, 4))
+    assert (a - c).abs().max() > 1e-4 and (a - quiet).abs().max() > 1e-4

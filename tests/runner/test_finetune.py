@@ -57,6 +57,23 @@ def test_fine_tune_from_a_model_file(tmp_path, monkeypatch, gripdem_data_root, s
     assert any(changed)  # and it trained from there
 
 
+def test_an_ensemble_starts_from_a_deterministic_model(
+    tmp_path, monkeypatch, gripdem_data_root, source
+):
+    """model=ensemble from a deterministic source: every weight but the noise path is the
+    source's, the run is scored and kept on the validation CRPS."""
+    monkeypatch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
+    out, report = run(tmp_path, "ens", ["model=ensemble", f"model.init_from={source}"])
+    assert math.isfinite(report["finetune/start_val_crps"]) and "test/spread_skill" in report
+    original = load_checkpoint_model(source).state_dict()
+    model = load_checkpoint_model(out / "checkpoints" / "best.safetensors")
+    assert model.is_ensemble
+    state = model.state_dict()
+    assert {k for k in state if k not in original} == {
+        k for k in state if k.startswith("encoder.noise_embedding.")
+    }
+
+
 def test_fine_tune_refuses_another_architecture(tmp_path, monkeypatch, gripdem_data_root, source):
     monkeypatch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
     with pytest.raises(ValueError, match="model.init_from=.*encoder"):

@@ -105,6 +105,18 @@ def test_the_ar_prior_refuses_the_paper_frame():
     assert not compose_run(["model=grip"]).model.ar_prior
 
 
+def test_the_ensemble_model_is_the_default_model_with_noise_and_its_own_score():
+    """model=ensemble: the default model's form, latent noise, the fair CRPS over 2 members,
+    and its best checkpoint on the validation CRPS (every other model: the RMSE)."""
+    ensemble, default = compose_run(["model=ensemble"]), compose_run([])
+    assert ensemble.model.encoder.noise_channels == 16 and default.model.encoder.noise_channels == 0
+    assert (ensemble.model.loss, ensemble.model.members) == ("crps", 2)
+    assert ensemble.callbacks.checkpoint.monitor == "val/crps"
+    assert default.callbacks.checkpoint.monitor == "val/rmse"
+    for key in ("decoder", "zero_mean", "ar_prior", "horizon"):
+        assert ensemble.model[key] == default.model[key]
+
+
 @pytest.mark.parametrize(
     ("override", "message"),
     [

@@ -186,22 +186,43 @@ def exact_loss(mode: str, deviation: torch.Tensor, true_deviation: torch.Tensor)
 
 
 def exact_crps_loss(
-    mode: str, members: torch.Tensor, true_deviation: torch.Tensor, per_step: bool = False
+    mode: str,
+    members: torch.Tensor,
+    true_deviation: torch.Tensor,
+    per_step: bool = False,
+    pairs: torch.Tensor | None = None,
+    pair_weight: float = 1.0,
 ) -> torch.Tensor:
     """Exact frame, an ensemble: the fair CRPS (:func:`~gripdem.evaluation.ensemble_scores.
     fair_crps`) of the members ``(M, B, N, f, 3)`` per coordinate of the positions over the
     horizon (grip, pct: cumulative deviations; vct: per-step displacements), over CV's mean
     absolute error (the CRPS of CV, a point forecast), so an untrained model scores 1 as it does
     under :func:`exact_loss`. ``per_step``: over CV's error at each horizon step, so every step
-    weighs the same (by default the late steps, whose errors are largest, dominate)."""
+    weighs the same (by default the late steps, whose errors are largest, dominate).
+
+    ``pairs`` ``(2, E)`` (receiver, neighbour over the flattened ``B * N`` nodes): add
+    ``pair_weight`` times the fair CRPS of the members' *relative* motion of each pair over CV's.
+    The per-coordinate CRPS scores each particle's marginal only: members may then move
+    neighbours independently, which breaks the contacts cohesion holds; the pair term scores
+    the joint motion of neighbours."""
     if mode != "vct":
         members, true_deviation = torch.cumsum(members, dim=3), torch.cumsum(true_deviation, dim=2)
     crps = fair_crps(members, true_deviation)  # (B, N, f, 3)
+    if pairs is not None:
+        # the pair term: the members' relative motion of every neighbour pair over CV's
+        i, j = pairs
+        x = members.flatten(1, 2)  # (M, B * N, f, 3)
+        y = true_deviation.flatten(0, 1)
+        x_rel = x.index_select(1, j) - x.index_select(1, i)
+        y_rel = y.index_select(0, j) - y.index_select(0, i)
+        cv_rel = y_rel.abs().mean().detach().clamp_min(1e-12)
+        pair_term = torch.mean(fair_crps(x_rel, y_rel)) / cv_rel
     if per_step:
         cv = true_deviation.abs().mean(dim=(0, 1, 3)).detach()  # (f,)
-        return torch.mean(crps.mean(dim=(0, 1, 3)) / cv.clamp_min(1e-12))
-    cv = torch.mean(true_deviation.abs()).detach()
-    return torch.mean(crps) / cv.clamp_min(1e-12)
+        loss = torch.mean(crps.mean(dim=(0, 1, 3)) / cv.clamp_min(1e-12))
+    else:
+        loss = torch.mean(crps) / torch.mean(true_deviation.abs()).detach().clamp_min(1e-12)
+    return loss if pairs is None else loss + pair_weight * pair_term
 
 
 # --------------------------------------------------------------------------------------------

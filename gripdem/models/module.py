@@ -138,8 +138,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             members per window: an ensemble learns the spread too; :mod:`gripdem.models.ensemble`).
         members, eval_members: ensemble members per window in training and in validation/test
             (``encoder.noise_channels > 0``: one forward pass draws one member).
-        loss_weighting: ``horizon`` (the CRPS over CV's over the whole horizon) | ``step``
-            (over CV's at each step: every step weighs the same).
+        loss_weighting, pair_crps: how the CRPS weighs the horizon steps and the neighbour
+            pairs' relative motion (:func:`gripdem.models.decoder_modes.exact_crps_loss`).
     """
 
     def __init__(
@@ -174,6 +174,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         members: int = 2,
         eval_members: int = 8,
         loss_weighting: str = "horizon",
+        pair_crps: float = 0.0,
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)

@@ -37,7 +37,11 @@ class TrainingSteps:
         if self.hparams.loss == "crps":
             members = pred if pred.ndim == 5 else pred[None]
             per_step = self.hparams.get("loss_weighting", "horizon") == "step"
-            return modes.exact_crps_loss(mode, members, self.true_deviation(batch), per_step)
+            weight = float(self.hparams.get("pair_crps", 0.0))
+            pairs = self.contact_graph(batch).edge_index if weight > 0 else None
+            return modes.exact_crps_loss(
+                mode, members, self.true_deviation(batch), per_step, pairs, weight
+            )
         if pred.ndim == 5:  # an ensemble scored on squared error: its mean
             pred = pred.mean(dim=0)
         if self.exact:

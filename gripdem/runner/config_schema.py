@@ -131,6 +131,7 @@ class ModelSchema:
     members: int = 2
     eval_members: int = 8
     loss_weighting: str = "horizon"
+    pair_crps: float = 0.0
     monitor: str = "val/rmse"
 
 

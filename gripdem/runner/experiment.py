@@ -127,6 +127,7 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         members=model_cfg["members"],
         eval_members=model_cfg["eval_members"],
         loss_weighting=model_cfg["loss_weighting"],
+        pair_crps=model_cfg["pair_crps"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),

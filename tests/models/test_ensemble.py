@@ -145,6 +145,9 @@ def test_crps_loss_starts_at_one_and_needs_two_members(tiny_pbc_path):
     stepwise = module(dm, loss_weighting="step").train()
     loss = stepwise._loss(stepwise.forward_members(batch, 2), batch)
     assert float(loss.detach()) == pytest.approx(1.0, abs=1e-6)  # each step's CV error is 1
+    paired = module(dm, pair_crps=0.5).train()
+    loss = paired._loss(paired.forward_members(batch, 2), batch)
+    assert float(loss.detach()) == pytest.approx(1.5, abs=1e-6)  # 1 + 0.5 x the pairs' 1
     with pytest.raises(ValueError, match="loss_weighting=step weighs the CRPS"):
         module(dm, noise_channels=0, loss_weighting="step")
     with pytest.raises(ValueError, match="at least 2 members"):

@@ -220,7 +220,10 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
         tuned = "model (fine-tuned)"
         if metrics.get("finetune/kept_start"):
             tuned = "model (the start: training did not beat it on validation)"
-        names = [(tuned, "test/rmse", "test/crps"), ("before fine-tuning", "before/test/rmse", "")]
+        names = [
+            (tuned, "test/rmse", "test/crps"),
+            ("before fine-tuning", "before/test/rmse", "before/test/crps"),
+        ]
     names += [(b, f"test/rmse_{b}", f"test/crps_{b}") for b in BASELINES]
     for name, key, crps in names:
         value = metrics.get(key, math.nan)

@@ -38,14 +38,14 @@ HEADERS = [
     "CRPS / d",
     "spread/skill step 1 / 10",
     "rank bins ÷ uniform",
-    "MSD 1/10/100 worst |r-1|",
-    "RMS non-aff. |r-1|",
-    "contacts |r-1|",
-    "profile |r-1|",
+    "MSD 1/10/100 dev.",
+    "RMS non-aff. dev.",
+    "contacts dev.",
+    "profile dev.",
     "g(r) L1",
-    "D |r-1|",
+    "D dev.",
     "spread/skill fr. 1-100",
-    "ms / member / frame",
+    "ms / member / frame (8 together; load varied)",
 ]
 
 
@@ -120,8 +120,9 @@ def main(argv: list[str] | None = None) -> None:
         [
             f"machine: {machine_line()}",
             "",
-            "Ensemble ablation (seed 0 each; 190-10 test windows out of sample; 2000-frame "
-            "surrogate runs on a new DEM simulation, worst 100-frame block and worst member). "
+            "Ensemble ablation (seed 0 unless the row says; 190-10 test windows out of sample; 2000-frame "
+            "surrogate runs on a new DEM simulation, worst 100-frame block and worst member; "
+            "dev.: the worst |model / truth - 1|). "
             "Targets: MSD within 0.15, RMS non-affine 0.10, contacts 0.03, profile 0.03, g(r) L1 "
             "0.02, D 0.20, spread/skill 0.8-1.2, rank bins 0.5-1.5.",
             "",

@@ -120,9 +120,9 @@ def main(argv: list[str] | None = None) -> None:
         [
             f"machine: {machine_line()}",
             "",
-            "Ensemble ablation (seed 0 unless the row says; 190-10 test windows out of sample; 2000-frame "
-            "surrogate runs on a new DEM simulation, worst 100-frame block and worst member; "
-            "dev.: the worst |model / truth - 1|). "
+            "Ensemble ablation (seed 0 unless the row says; 190-10 test windows out of sample; "
+            "2000-frame surrogate runs on a new DEM simulation, worst 100-frame block and worst "
+            "member; dev.: the worst |model / truth - 1|). "
             "Targets: MSD within 0.15, RMS non-affine 0.10, contacts 0.03, profile 0.03, g(r) L1 "
             "0.02, D 0.20, spread/skill 0.8-1.2, rank bins 0.5-1.5.",
             "",

@@ -16,10 +16,10 @@ import time
 import h5py
 import numpy as np
 
-from gripdem.boundary import lattice_continuous_steps
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
 from gripdem.evaluation.rollout_stats import profile_basis
+from gripdem.inference.relaxation import frame_velocities
 
 
 def generator_config(data_path) -> GeneratorConfig:
@@ -29,12 +29,7 @@ def generator_config(data_path) -> GeneratorConfig:
     return GeneratorConfig.from_mappings(params["scene"], params["preset"], sims=1)
 
 
-def restart_velocities(pair: np.ndarray, times: np.ndarray, boundary) -> np.ndarray:
-    """Velocities ``(N, 3)`` at the second of two frames ``(2, N, 3)``: the lattice-continuous
-    step over the interval (a particle that just crossed an LE face carries the jump)."""
-    offsets = boundary.offset(times)[None, :] if boundary.is_lees_edwards else None
-    step = lattice_continuous_steps(pair.transpose(1, 0, 2), boundary.box, offsets, anchor=-1)
-    return step[:, 0] / float(times[1] - times[0])
+restart_velocities = frame_velocities  # the velocities a hand-back gives the DEM
 
 
 def kinetic_energies(config: GeneratorConfig, positions, velocities) -> dict:

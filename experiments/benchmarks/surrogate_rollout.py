@@ -62,6 +62,7 @@ from gripdem.evaluation.rollout_stats import (
     diffusion_coefficients,
 )
 from gripdem.inference.checkpoint import load_model
+from gripdem.inference.relaxation import DemRelaxation
 from gripdem.inference.rollout import rollout
 from gripdem.inference.stepper import PARTS, StepperSettings
 from gripdem.models.baselines import predict_baseline
@@ -190,7 +191,13 @@ def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     meta = read_meta(path)
     model = load_model(checkpoint, meta)
     truth, times = read_sim(path, 0)
-    settings = StepperSettings(link=args.link, contact_correction=not args.no_correction)
+    config = generator_config(path)
+    relaxation = DemRelaxation(config, args.relax_steps) if args.relax_steps else None
+    settings = StepperSettings(
+        link=args.link,
+        contact_correction=not args.no_correction and relaxation is None,
+        relaxation=relaxation,
+    )
     started = time.perf_counter()
     run = rollout(
         model,
@@ -209,7 +216,6 @@ def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     start = np.broadcast_to(truth[k : k + 1], (members, 1) + truth.shape[1:])
     predicted = np.concatenate([start, run.by_member(run.predicted)[0]], axis=1)  # frame 0
     span = slice(k, k + 1 + n)
-    config = generator_config(path)
     stat_members = min(members, args.stat_members or members)
     member_blocks = [
         block_statistics(
@@ -277,6 +283,14 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--link", type=int, help="frames kept per forward pass")
     parser.add_argument("--no-correction", action="store_true")
     parser.add_argument("--handback-steps", type=int, default=100)
+    parser.add_argument(
+        "--relax-steps",
+        type=int,
+        default=0,
+        metavar="N",
+        help="the hybrid: the built-in DEM integrates the last N time steps of every predicted "
+        "frame in place of the geometric contact correction (0: off)",
+    )
     parser.add_argument("--members", type=int, default=1, help="ensemble members per scene")
     parser.add_argument("--seed", type=int, default=0, help="seed of the members' noise")
     parser.add_argument(

@@ -36,7 +36,7 @@ from gripdem.data.batch import inference_batch
 from gripdem.data.graph import graph_from_pairs
 from gripdem.inference.contacts import Correction, push_apart
 
-PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction")
+PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction", "relaxation")
 
 
 @dataclass
@@ -48,7 +48,9 @@ class StepperSettings:
     allowed, in diameters; correction_sweeps: at most this many Gauss-Seidel sweeps. skin: of the
     neighbour list, in diameters. compile: the encoder through ``torch.compile`` (pays for long
     rollouts: seconds of compilation, then a faster forward; falls back with a warning where no
-    compiler works).
+    compiler works). relaxation: a callable ``(previous (N, 3), frame (N, 3), times (2,)) ->
+    frame`` applied to every predicted frame before anything else (the hybrid surrogate,
+    :class:`gripdem.inference.relaxation.DemRelaxation`; None: off).
     """
 
     link: int | None = None
@@ -57,9 +59,12 @@ class StepperSettings:
     correction_sweeps: int = 50
     skin: float = 0.3
     compile: bool = False
+    relaxation: object | None = None
 
     def to_dict(self) -> dict:
-        return dict(self.__dict__)
+        out = dict(self.__dict__)
+        out["relaxation"] = None if self.relaxation is None else str(self.relaxation)
+        return out
 
 
 @dataclass
@@ -161,6 +166,13 @@ class Stepper:
     def _accept(self, frame: np.ndarray, times: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         """Move the lists to a predicted frame ``(S, N, 3)``, correct it, add it to the state;
         returns the frame as kept."""
+        if self.settings.relaxation is not None:
+            started = time.perf_counter()
+            frame = frame.copy()
+            for sim in range(len(frame)):
+                pair_times = np.array([self.times[sim, -1], times[sim]])
+                frame[sim] = self.settings.relaxation(self.frames[sim, -1], frame[sim], pair_times)
+            self.seconds["relaxation"] += time.perf_counter() - started
         kept = frame.copy()
         for sim, nl in enumerate(self.lists):
             started = time.perf_counter()

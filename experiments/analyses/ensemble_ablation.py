@@ -45,7 +45,7 @@ HEADERS = [
     "g(r) L1",
     "D dev.",
     "spread/skill fr. 1-100",
-    "ms / member / frame (8 together; load varied)",
+    "ms / member / frame (members together; load varied)",
 ]
 
 

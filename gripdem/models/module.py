@@ -54,13 +54,8 @@ ENCODER_OPTIONS = {
         "dense_init",
     ),
     "interaction": (
-        "channels",
-        "rounds",
-        "edge_history",
-        "edge_updates",
-        "position_features",
-        "noise_channels",
-        "noise_into",
+        *("channels", "rounds", "edge_history", "edge_updates", "position_features"),
+        *("noise_channels", "noise_into", "noise_neighbours"),
     ),
 }
 LR_SCHEDULES = ("constant", "cosine")

@@ -120,6 +120,9 @@ class InteractionEncoder(nn.Module):
         noise_into: where the noise's embeddings are added to the node latents: ``rounds``
             (before every round and to the output), ``input`` (before the first round only)
             or ``head`` (to the output only: the message passing stays deterministic).
+        noise_neighbours: each particle's noise is its own plus its graph neighbours', over
+            ``sqrt(1 + neighbours)`` (unit variance): neighbours share part of their noise, so
+            touching particles can be moved together.
     """
 
     def __init__(
@@ -132,6 +135,7 @@ class InteractionEncoder(nn.Module):
         edge_updates: bool = True,
         noise_channels: int = 0,
         noise_into: str = "rounds",
+        noise_neighbours: bool = False,
     ):
         super().__init__()
         if rounds < 1:
@@ -157,6 +161,7 @@ class InteractionEncoder(nn.Module):
         if noise_into not in NOISE_INTO:
             raise ValueError(f"noise_into must be one of {NOISE_INTO}, got {noise_into!r}")
         self.noise_into = noise_into
+        self.noise_neighbours = bool(noise_neighbours)
         # the places (round index, `rounds`: the output) where an embedding of the noise is
         # added; default init: the members differ from the first step, so the CRPS's spread
         # term has a gradient
@@ -216,6 +221,11 @@ class InteractionEncoder(nn.Module):
         e = self.edge_in(self.edge_inputs(flat, graph))
         z = self._noise(noise, b, n)
         index = graph.edge_index
+        if z is not None and self.noise_neighbours:
+            count = torch.zeros_like(z[:, :1]).index_add_(
+                0, index[0], torch.ones_like(index[0], dtype=z.dtype)[:, None]
+            )
+            z = z.index_add(0, index[0], z.index_select(0, index[1])) / torch.sqrt(1 + count)
         for r, (message, node_update) in enumerate(
             zip(self.message, self.node_update, strict=True)
         ):

@@ -102,6 +102,7 @@ class EncoderSchema:
     position_features: PositionFeatures = PositionFeatures.auto
     noise_channels: int = 0
     noise_into: str = "rounds"
+    noise_neighbours: bool = False
 
 
 @dataclass

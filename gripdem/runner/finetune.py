@@ -38,7 +38,7 @@ from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.models.module import encoder_options
 
 #: encoder options of the latent-noise path (an ensemble may start from a model without it)
-NOISE_OPTIONS = ("noise_channels", "noise_into")
+NOISE_OPTIONS = ("noise_channels", "noise_into", "noise_neighbours")
 
 log = logging.getLogger(__name__)
 

@@ -215,3 +215,21 @@ def test_the_noise_enters_where_asked(tiny_pbc_path, where):
         a, c = model(batch), model(batch)
         quiet = model(batch, noise=torch.zeros(b, n, 4))
     assert (a - c).abs().max() > 1e-4 and (a - quiet).abs().max() > 1e-4
+
+
+def test_neighbour_shared_noise_keeps_the_zero_noise_network(tiny_lebc_path):
+    """noise_neighbours: each particle's noise mixed with its neighbours' (unit variance); zero
+    noise is still the deterministic network, and the members still differ."""
+    dm = datamodule(tiny_lebc_path)
+    encoder = {**ENCODER, "noise_channels": 4, "noise_neighbours": True}
+    model = perturb(module(dm, encoder=encoder)).eval()
+    batch = next(iter(dm.test_dataloader()))
+    b, n = batch.inputs.shape[:2]
+    with torch.no_grad():
+        quiet = model(batch, noise=torch.zeros(b, n, 4))
+        deterministic = module(dm, noise_channels=0).eval()
+        deterministic.load_state_dict(model.state_dict(), strict=False)
+        reference = deterministic(batch)
+        a, c = model(batch), model(batch)
+    torch.testing.assert_close(quiet, reference, rtol=0, atol=1e-6 * float(reference.abs().max()))
+    assert (a - c).abs().max() > 1e-4

@@ -153,13 +153,15 @@ def member_cost(checkpoint, reference, scene, args, preset, frames: int = 100, r
     """ms per member and frame over ``frames`` frames from the truth's start, side by side and
     interleaved (fastest of ``repeats``): the reference model (one member), the ensemble with
     one member, and the ensemble with ``--members`` members advanced together."""
-    k = None
-    models = {}
-    for name, path in (("reference", reference), ("ensemble", checkpoint)):
-        models[name] = load_model(path, read_meta(scene_dataset(scene, preset)))
-        k = int(models[name].hparams.history_len)
-    truth, times = read_sim(truth_dataset(scene, preset, k + 1 + args.frames), 0, k + 1)
-    meta = read_meta(truth_dataset(scene, preset, k + 1 + args.frames))
+    scene_meta = read_meta(scene_dataset(scene, preset))
+    models = {
+        name: load_model(path, scene_meta)
+        for name, path in (("reference", reference), ("ensemble", checkpoint))
+    }
+    k = int(models["ensemble"].hparams.history_len)
+    path = truth_dataset(scene, preset, k + 1 + args.frames)
+    truth, times = read_sim(path, 0, k + 1)
+    meta = read_meta(path)
     cases = {
         "reference, 1 member": (models["reference"], 1),
         "ensemble, 1 member": (models["ensemble"], 1),

@@ -88,15 +88,15 @@ def _ensemble_scores(member_pred, true, times, meta: DatasetMeta, baselines) -> 
     offsets = meta.boundary.offset(times)
     d = meta.diameter
 
-    def crps(forecast) -> list[float]:
-        res = position_residuals(forecast, true, meta.box, offsets)
+    def crps(res) -> list[float]:
         return [float(v) / d for v in crps_per_step(res)]
 
-    out: dict[str, Any] = {"crps_over_d": {"model": crps(member_pred)}}
-    out["crps_over_d"].update({name: crps(values) for name, values in baselines.items()})
+    res = position_residuals(member_pred, true, meta.box, offsets)  # (M, S, n, N, 3)
+    out: dict[str, Any] = {"crps_over_d": {"model": crps(res)}}
+    for name, values in baselines.items():
+        out["crps_over_d"][name] = crps(position_residuals(values, true, meta.box, offsets))
     if len(member_pred) < 2:
         return out
-    res = position_residuals(member_pred, true, meta.box, offsets)
     out["member_rmse_over_d"] = [[float(v) / d for v in rmse_per_step(r)] for r in res]
     out["spread_skill"] = [float(v) for v in spread_skill_per_step(res)]
     out["rank_histogram_frames_1_100"] = rank_histogram(res, slice(0, 100)).tolist()

@@ -150,7 +150,8 @@ class RolloutEvaluation:
     def ensemble_metrics(self, stage: str, data: dict[str, Any]) -> dict[str, float]:
         """CRPS (m; per step in diameters) for the model (its members' fair CRPS; a point forecast's
         is its mean absolute error) and every baseline; for an ensemble also the spread/skill
-        ratio per step, a member's RMSE and the rank histogram's extreme bins over uniform."""
+        ratio per step, a member's RMSE and the rank histogram's extreme bins over uniform. The
+        curves behind them go into ``data["scores"]`` (the run's scores figure)."""
         box, d = self.boundary.box, self.diameter
         metrics: dict[str, float] = {}
         curves: dict[str, Any] = {"crps_over_d": {}}
@@ -158,8 +159,9 @@ class RolloutEvaluation:
         members = data.get("members")
         forecasts = {"crps": data["pred"] if members is None else members}
         forecasts.update({f"crps_{name}": data[name] for name in self.baselines})
+        residuals = {}
         for key, forecast in forecasts.items():
-            res = position_residuals(forecast, data["true"], box, data["offsets"])
+            res = residuals[key] = position_residuals(forecast, data["true"], box, data["offsets"])
             per_step = crps_per_step(res)
             metrics[f"{stage}/{key}"] = float(per_step.mean())
             curves["crps_over_d"][key.removeprefix("crps_") if key != "crps" else "model"] = (
@@ -171,7 +173,7 @@ class RolloutEvaluation:
                     metrics[f"{stage}/crps_step/{step:03d}"] = float(value)
         if members is None:
             return metrics
-        res = position_residuals(members, data["true"], box, data["offsets"])
+        res = residuals["crps"]  # the members' (M, W, f, N, 3)
         metrics[f"{stage}/members"] = float(members.shape[0])
         ratio = spread_skill_per_step(res)
         metrics[f"{stage}/spread_skill"] = float(ratio.mean())

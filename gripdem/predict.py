@@ -3,7 +3,7 @@
     python -m gripdem.predict CHECKPOINT DATA.h5 [--start FRAME] [--frames N] [--sims S ...]
         [--step M] [--out PRED.h5] [--trajectory TRAJ.h5] [--report REPORT.json]
         [--overlap-margin F] [--no-overlap] [--members M] [--seed S] [--device cpu]
-        [--threads T] [--overwrite]
+        [--threads T] [--precision auto|fp32|bf16] [--overwrite]
 
 The model (encoding, normaliser, history length, horizon, graph cut-off, fitted AR baseline)
 comes from the checkpoint; the scene's conventions (box, LE sign and time origin) from the data,
@@ -161,6 +161,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="seed of the members' noise (the same seed, the same members; default: random)",
     )
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument(
+        "--precision",
+        default="fp32",
+        choices=["auto", "fp32", "bf16"],
+        help="the encoder's arithmetic: bf16 where the device computes it natively (CPU "
+        "avx512_bf16 or AMX, CUDA 8.0+; auto picks it there, fp32 elsewhere)",
+    )
     p.add_argument("--threads", type=int, metavar="T", help="torch CPU threads")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     return p

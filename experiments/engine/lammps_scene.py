@@ -96,14 +96,23 @@ def f(value) -> str:
 
 def write_data_file(path: Path, config: GeneratorConfig, seed: int) -> None:
     """gripdem's packing and initial velocities as a LAMMPS data file (LAMMPS axes)."""
-    box, d, n = config.box, config.scene.diameter, config.preset.particles
-    positions = random_packing(n, box, d, np.random.default_rng(seed))
-    velocities = initial_velocities(config, positions)
+    positions = random_packing(
+        config.preset.particles, config.box, config.scene.diameter, np.random.default_rng(seed)
+    )
+    write_state_file(path, config, positions, initial_velocities(config, positions), 0.0, seed)
+
+
+def write_state_file(
+    path: Path, config: GeneratorConfig, positions, velocities, tilt: float, seed=None
+) -> None:
+    """A state ``positions, velocities (N, 3)`` (gripdem axes, SI) of ``config``'s box as a
+    LAMMPS data file (LAMMPS axes); ``tilt``: the sheared box's xy tilt (its LE offset)."""
+    box, d, n = config.box, config.scene.diameter, len(positions)
     axes = axes_of(config)
     pos, vel = axes.to_lammps(positions), axes.to_lammps(velocities)
     half = 0.5 * axes.to_lammps(box.lengths)
     lines = [
-        f"gripdem scene {config.scene.name}, seed {seed}",
+        f"gripdem scene {config.scene.name}" + ("" if seed is None else f", seed {seed}"),
         "",
         f"{n} atoms",
         "1 atom types",
@@ -111,7 +120,7 @@ def write_data_file(path: Path, config: GeneratorConfig, seed: int) -> None:
     ]
     lines += [f"{f(-h)} {f(h)} {a}lo {a}hi" for h, a in zip(half, "xyz", strict=True)]
     if config.scene.boundary == "lees_edwards":
-        lines.append("0.0 0.0 0.0 xy xz yz")
+        lines.append(f"{f(tilt)} 0.0 0.0 xy xz yz")
     lines += ["", "Atoms # sphere", ""]
     lines += [
         f"{i + 1} 1 {f(d)} {f(config.scene.density)} {f(p[0])} {f(p[1])} {f(p[2])} 0 0 0"
@@ -200,12 +209,36 @@ def load_lammps():
     return lammps
 
 
+def start_lammps(config: GeneratorConfig, work: Path, threads: int = 1):
+    """A LAMMPS instance in ``work`` (which holds ``init.data``) set up for ``config``'s scene:
+    contacts, cohesion table, drag, drive or shear (the vorticity torque as a callback); the
+    caller runs it, then closes it and returns to its own directory (``os.chdir``)."""
+    cutoff = write_cohesion_table(work / "cohesion.table", config) if config.scene.hamaker else None
+    setup = setup_script(config, cutoff)
+    (work / "in.lammps").write_text(setup)
+    args = ["-log", str(work / "log.lammps"), "-screen", "none"]
+    if threads > 1:  # the OPENMP package's styles where the build has them
+        args += ["-sf", "omp", "-pk", "omp", str(threads)]
+    lmp = load_lammps()(cmdargs=args)
+    os.chdir(work)
+    lmp.commands_string(setup)
+    if config.scene.boundary == "lees_edwards":
+        s = config.scene
+        gamma_rot = 8.0 * math.pi * s.fluid_viscosity * (0.5 * s.diameter) ** 3
+        torque = gamma_rot * (-0.5 * s.shear_rate)  # drag toward the fluid's vorticity
+
+        def vorticity(caller, step, nlocal, tag, x, force):  # LAMMPS z = our y
+            force[:] = 0.0
+            lmp.numpy.extract_atom("torque")[:nlocal, 2] += torque
+
+        lmp.set_fix_external_callback("vorticity", vorticity, None)
+    return lmp
+
+
 def run_scene(config: GeneratorConfig, work: Path, seed: int) -> Path:
     """Run LAMMPS in ``work``; returns the dump file (all frames, gzip)."""
     work.mkdir(parents=True, exist_ok=True)
     write_data_file(work / "init.data", config, seed)
-    cutoff = write_cohesion_table(work / "cohesion.table", config) if config.scene.hamaker else None
-    setup = setup_script(config, cutoff)
     per_frame = config.steps_per_frame
     spinup, frames = config.spinup_frames * per_frame, (config.preset.frames - 1) * per_frame
     dump = f"{config.scene.name}.dump.gz"
@@ -215,22 +248,10 @@ def run_scene(config: GeneratorConfig, work: Path, seed: int) -> Path:
         "dump_modify frames format float %.17g sort id\n"
         f"run {frames}\n"
     )
-    (work / "in.lammps").write_text(setup + production)
-    lmp = load_lammps()(cmdargs=["-log", str(work / "log.lammps"), "-screen", "none"])
     cwd = Path.cwd()
+    lmp = start_lammps(config, work)
     try:
-        os.chdir(work)
-        lmp.commands_string(setup)
-        if config.scene.boundary == "lees_edwards":
-            s = config.scene
-            gamma_rot = 8.0 * math.pi * s.fluid_viscosity * (0.5 * s.diameter) ** 3
-            torque = gamma_rot * (-0.5 * s.shear_rate)  # drag toward the fluid's vorticity
-
-            def vorticity(caller, step, nlocal, tag, x, force):  # LAMMPS z = our y
-                force[:] = 0.0
-                lmp.numpy.extract_atom("torque")[:nlocal, 2] += torque
-
-            lmp.set_fix_external_callback("vorticity", vorticity, None)
+        (work / "in.lammps").write_text((work / "in.lammps").read_text() + production)
         started = time.perf_counter()
         lmp.commands_string(production)
         print(f"  LAMMPS: {spinup + frames} steps in {time.perf_counter() - started:.0f} s")
@@ -238,6 +259,38 @@ def run_scene(config: GeneratorConfig, work: Path, seed: int) -> Path:
         lmp.close()
         os.chdir(cwd)
     return work / dump
+
+
+def lammps_per_frame(
+    config: GeneratorConfig,
+    positions,
+    velocities,
+    tilt: float,
+    frames: int,
+    work: Path,
+    threads: int = 1,
+) -> dict:
+    """LAMMPS seconds per frame (``steps_per_frame`` steps of ``dt``) from a state of
+    ``config``'s box, timed frame by frame after one untimed step (set-up, neighbour lists):
+    the fastest of ``frames`` and the mean."""
+    work.mkdir(parents=True, exist_ok=True)
+    write_state_file(work / "init.data", config, positions, velocities, tilt)
+    cwd = Path.cwd()
+    lmp = start_lammps(config, work, threads)
+    walls = []
+    try:
+        lmp.command("run 1")
+        for _ in range(frames):
+            started = time.perf_counter()
+            lmp.command(f"run {config.steps_per_frame} pre no post no")
+            walls.append(time.perf_counter() - started)
+        atoms = int(lmp.get_natoms())
+    finally:
+        lmp.close()
+        os.chdir(cwd)
+    if atoms != len(positions):
+        raise RuntimeError(f"LAMMPS lost atoms: {atoms} of {len(positions)}")
+    return {"s_per_frame": min(walls), "s_per_frame_mean": float(np.mean(walls)), "frames": frames}
 
 
 def convert(config: GeneratorConfig, dump: Path, out: Path) -> str:

@@ -136,6 +136,7 @@ def apply_checkpoint(
         link=args.step,
         contact_correction=not getattr(args, "no_correction", False),
         contact_distance=float(getattr(args, "contact_distance", 1.0)),
+        precision=str(getattr(args, "precision", "fp32")),
     )
     members = int(getattr(args, "members", 1) or 1)
     seed = getattr(args, "seed", None)
@@ -169,6 +170,7 @@ def apply_checkpoint(
         "horizon": f,
         "step": f if args.step is None else int(args.step),
         "settings": settings.to_dict(),
+        "precision": run.stepper.precision,
         "encoding": hp["encoding"],
         "decoder_mode": hp["decoder_mode"],
         "encoder": (hp.get("encoder") or {}).get("name", "graph_conv"),

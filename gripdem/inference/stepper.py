@@ -24,6 +24,7 @@ Shapes: ``S`` simulations advanced together (one batch), ``N`` particles; frames
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -35,6 +36,7 @@ from gripdem.boundary import NeighbourList, minimum_image, wrap_positions
 from gripdem.data.batch import inference_batch
 from gripdem.data.graph import graph_from_pairs
 from gripdem.inference.contacts import Correction, push_apart
+from gripdem.inference.precision import resolve_precision, set_encoder_precision
 
 PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction", "relaxation")
 
@@ -50,7 +52,10 @@ class StepperSettings:
     rollouts: seconds of compilation, then a faster forward; falls back with a warning where no
     compiler works). relaxation: a callable ``(previous (N, 3), frame (N, 3), times (2,)) ->
     frame`` applied to every predicted frame before anything else (the hybrid surrogate,
-    :class:`gripdem.inference.relaxation.DemRelaxation`; None: off).
+    :class:`gripdem.inference.relaxation.DemRelaxation`; None: off). precision: of the
+    encoder (auto | fp32 | bf16, :mod:`gripdem.inference.precision`; auto: bf16 where the
+    device computes it natively); the stepper then runs a copy of the model, the model passed
+    in is left as it was.
     """
 
     link: int | None = None
@@ -60,6 +65,7 @@ class StepperSettings:
     skin: float = 0.3
     compile: bool = False
     relaxation: object | None = None
+    precision: str = "fp32"
 
     def to_dict(self) -> dict:
         out = dict(self.__dict__)
@@ -81,8 +87,12 @@ class Stepper:
     """Advance ``model`` from ``observed`` frames ``(S, K+1, N, 3)`` at ``times (S, K+1)``."""
 
     def __init__(self, model, observed: np.ndarray, times: np.ndarray, settings=None):
-        self.model = model.eval()
         self.settings = settings or StepperSettings()
+        self.precision = resolve_precision(self.settings.precision, next(model.parameters()).device)
+        if self.precision != "fp32":
+            model = copy.deepcopy(model)
+            set_encoder_precision(model, self.precision)
+        self.model = model.eval()
         if self.settings.compile:
             compile_encoder(model)
         self.k = int(model.hparams.history_len)

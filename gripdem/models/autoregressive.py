@@ -133,34 +133,49 @@ class LinearAR:
         observed_offsets: torch.Tensor | None,
         horizon: int,
         boundary: Boundary,
+        relative: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """The filter's steps over the horizon, lattice-continuous in the image cell of the
         last observed frame (the exact frame of :mod:`gripdem.models.decoder_modes`).
 
         observed ``(windows, K+1, particles, 3)`` wrapped (K >= lags), observed_offsets
         ``(windows, K+1)`` float64 (ignored in a periodic box) -> ``(windows, particles,
-        horizon, 3)`` float64; the first step goes from the last observed frame."""
+        horizon, 3)`` float64; the first step goes from the last observed frame. ``relative``:
+        the observed flow-relative steps ``(windows, particles, K, 3)`` float64 when the caller
+        has them (with this filter's strain), else computed here."""
         observed = torch.as_tensor(observed).double().transpose(1, 2)  # (W, N, K+1, 3)
         if observed.shape[2] - 1 < self.lags:
             raise ValueError(
                 f"linear AR baseline fitted with {self.lags} lags needs at least that many "
                 f"observed steps, got {observed.shape[2] - 1}"
             )
-        obs_off = None
-        if boundary.is_lees_edwards:
-            obs_off = torch.as_tensor(observed_offsets, dtype=torch.float64)[:, None, :]
-        rel, _ = _flow_relative_steps(observed, boundary.box, obs_off, self.strain)
+        rel = relative
+        if rel is None:
+            obs_off = None
+            if boundary.is_lees_edwards:
+                obs_off = torch.as_tensor(observed_offsets, dtype=torch.float64)[:, None, :]
+            rel, _ = _flow_relative_steps(observed, boundary.box, obs_off, self.strain)
         weights = torch.tensor(self.weights, dtype=torch.float64, device=observed.device)
-        history = [rel[..., -k, :] for k in range(1, self.lags + 1)]  # lag 1 first
+        lagged = 3 * self.lags
+        # the features of :func:`_features` in one buffer: the lags (lag 1 first) shift by one
+        # step each time, the newest step goes in front; the same product as the fit's
+        features = torch.ones(rel.shape[:-2] + (self.n_features,), dtype=torch.float64,
+                              device=observed.device)  # fmt: skip
+        features[..., :lagged] = rel[..., -self.lags :, :].flip(-2).flatten(-2)
         x = observed[..., -1, 0]
-        steps = []
-        for _ in range(horizon):
-            step_rel = _features(history, x, self.lx) @ weights
-            step = add_affine_flow(step_rel[..., None, :], x[..., None], self.strain)[..., 0, :]
+        theta_scale = 2 * math.pi / self.lx
+        steps = torch.empty(rel.shape[:-2] + (horizon, 3), dtype=torch.float64, device=x.device)
+        for s in range(horizon):
+            theta = theta_scale * x
+            features[..., lagged] = torch.sin(theta)
+            features[..., lagged + 1] = torch.cos(theta)
+            step_rel = features @ weights
+            step = add_affine_flow(step_rel, x, self.strain)
+            steps[..., s, :] = step
             x = x + step[..., 0]
-            steps.append(step)
-            history = [step_rel] + history[:-1]
-        return torch.stack(steps, dim=-2)
+            features[..., 3:lagged] = features[..., : lagged - 3].clone()
+            features[..., :3] = step_rel
+        return steps
 
     def predict(
         self,

@@ -37,7 +37,12 @@ from dataclasses import dataclass
 
 import torch
 
-from gripdem.boundary import Boundary, lattice_continuous_steps
+from gripdem.boundary import (
+    Boundary,
+    lattice_continuous_steps,
+    remove_affine_flow,
+    step_start_x,
+)
 from gripdem.data.encodings import Encoding
 from gripdem.data.normalizer import Normalizer
 from gripdem.evaluation.ensemble_scores import fair_crps
@@ -228,19 +233,43 @@ def exact_crps_loss(
 # --------------------------------------------------------------------------------------------
 # the exact frame from a batch (float64)
 # --------------------------------------------------------------------------------------------
+def derived(batch, key, compute):
+    """A quantity derived from ``batch``'s tensors, computed once per batch object (the model's
+    inputs, its AR prior, its loss and its decoding all read the observed steps; a batch moved
+    to another device is a new object). Callers must not modify the returned tensor."""
+    cache = batch.__dict__.setdefault("_derived", {})
+    if key not in cache:
+        cache[key] = compute()
+    return cache[key]
+
+
 def history_steps(batch, boundary: Boundary) -> torch.Tensor:
     """Observed steps ``(B, N, K, 3)`` float64, lattice-continuous, anchored at the last
     observed frame (the last one is the CV step ``v0``)."""
-    positions = batch.input_positions.double()
-    offsets = batch.input_offsets.double()[:, None, :] if boundary.is_lees_edwards else None
-    return lattice_continuous_steps(positions, boundary.box, offsets, anchor=-1)
+
+    def compute():
+        positions = batch.input_positions.double()
+        offsets = batch.input_offsets.double()[:, None, :] if boundary.is_lees_edwards else None
+        return lattice_continuous_steps(positions, boundary.box, offsets, anchor=-1)
+
+    return derived(batch, ("history_steps", boundary), compute)
+
+
+def flow_relative_history(batch, boundary: Boundary, strain: float) -> torch.Tensor:
+    """The observed steps without the LE cell's affine flow (``strain`` per frame) ``(B, N, K,
+    3)`` float64, once per batch (the interaction encoder's inputs and the AR prior)."""
+
+    def compute():
+        steps = history_steps(batch, boundary)
+        x_start = step_start_x(steps, batch.last_positions[..., 0].double())
+        return remove_affine_flow(steps, x_start, strain)
+
+    return derived(batch, ("flow_relative", boundary, strain), compute)
 
 
 def last_step(batch, boundary: Boundary) -> torch.Tensor:
     """The CV step ``v0`` ``(B, N, 3)`` float64 (anchored at the last observed frame)."""
-    positions = batch.input_positions[:, :, -2:].double()
-    offsets = batch.input_offsets[:, -2:].double()[:, None, :] if boundary.is_lees_edwards else None
-    return lattice_continuous_steps(positions, boundary.box, offsets, anchor=-1)[:, :, 0]
+    return history_steps(batch, boundary)[:, :, -1]
 
 
 def target_steps(batch, boundary: Boundary) -> torch.Tensor:

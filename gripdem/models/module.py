@@ -24,8 +24,6 @@ from gripdem.boundary import (
     Box,
     LeesEdwards,
     affine_flow_strain,
-    remove_affine_flow,
-    step_start_x,
 )
 from gripdem.data.encodings import make_encoding
 from gripdem.data.normalizer import Normalizer
@@ -55,7 +53,7 @@ ENCODER_OPTIONS = {
     ),
     "interaction": (
         *("channels", "rounds", "edge_history", "edge_updates", "position_features"),
-        *("noise_channels", "noise_into", "noise_neighbours"),
+        *("noise_channels", "noise_into", "noise_neighbours", "pair_channels"),
     ),
 }
 LR_SCHEDULES = ("constant", "cosine")
@@ -293,9 +291,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
     def _interaction_inputs(self, batch) -> tuple[torch.Tensor, torch.Tensor | None]:
         """Flow-relative steps ``(B, N, K, 3)`` in velocity units and, where the drive depends
         on x, ``sin``/``cos`` of x at the last observed frame ``(B, N, 2)``."""
-        steps = modes.history_steps(batch, self.boundary)
-        x_start = step_start_x(steps, batch.last_positions[..., 0].double())
-        relative = (remove_affine_flow(steps, x_start, self.strain) / self.velocity_unit).float()
+        relative = modes.flow_relative_history(batch, self.boundary, self.strain)
+        relative = (relative / self.velocity_unit).float()
         if self.training and self.hparams.input_noise > 0:
             scale = self.hparams.input_noise * float(self.change_std.mean()) / self.velocity_unit
             relative = relative + scale * torch.randn_like(relative)
@@ -347,11 +344,13 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
     def ar_deviation(self, batch) -> torch.Tensor:
         """The linear AR forecast's per-step deviation from CV in units of the velocity change
         ``(B, N, f, 3)`` float32 (computed in float64; the exact frame's prior)."""
+        same = self.linear_ar.strain == self.strain
         steps = self.linear_ar.rollout_steps(
             batch.input_positions.double().transpose(1, 2),
             batch.input_offsets.double(),
             self.hparams.horizon,
             self.boundary,
+            modes.flow_relative_history(batch, self.boundary, self.strain) if same else None,
         )
         v0 = modes.last_step(batch, self.boundary)[:, :, None]
         return ((steps - v0) / self.change_std).float()

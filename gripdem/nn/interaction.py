@@ -92,16 +92,29 @@ class PairMLP(nn.Module):
         self.edge = nn.Linear(edge_channels, hidden, bias=False)
         self.out = nn.Linear(hidden, n_out)
 
-    def forward(self, h: torch.Tensor, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
-        """h ``(nodes, C)``, x ``(E, C_e)``, edge_index ``(2, E)`` -> ``(E, n_out)``."""
+    def node_terms(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """h ``(nodes, C)`` -> the first layer's receiver and sender terms, ``(nodes, hidden)``
+        each (computed once per node, gathered per edge by :meth:`edges`)."""
+        return self.receiver(h), self.sender(h)
+
+    def edges(
+        self, terms: tuple[torch.Tensor, torch.Tensor], x: torch.Tensor, edge_index: torch.Tensor
+    ) -> torch.Tensor:
+        """:meth:`node_terms`, x ``(E, C_e)``, edge_index ``(2, E)`` -> ``(E, n_out)`` (any
+        subset of the edges: the rows of ``x`` and the columns of ``edge_index`` agree)."""
         i, j = edge_index
         # index_select, not h[i]: its backward is an index_add, advanced indexing's is a
         # much slower accumulating index_put on the CPU; the sums go in place into the edge
         # term (no (E, hidden) temporaries; addition needs no saved inputs for autograd)
         first = self.edge(x)
-        first += self.receiver(h).index_select(0, i)
-        first += self.sender(h).index_select(0, j)
-        return self.out(nn.functional.silu(first))
+        first += terms[0].index_select(0, i)
+        first += terms[1].index_select(0, j)
+        # in place where no gradient is taken (the activation's input is not kept)
+        return self.out(nn.functional.silu(first, inplace=not torch.is_grad_enabled()))
+
+    def forward(self, h: torch.Tensor, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
+        """h ``(nodes, C)``, x ``(E, C_e)``, edge_index ``(2, E)`` -> ``(E, n_out)``."""
+        return self.edges(self.node_terms(h), x, edge_index)
 
 
 class InteractionEncoder(nn.Module):
@@ -123,7 +136,18 @@ class InteractionEncoder(nn.Module):
         noise_neighbours: each particle's noise is its own plus its graph neighbours', over
             ``sqrt(1 + neighbours)`` (unit variance): neighbours share part of their noise, so
             touching particles can be moved together.
+        pair_channels: width of the pair latents and of the pair MLPs' hidden layers (None:
+            ``channels``). The per-edge products scale with its square: 32 of 64 channels is a
+            quarter of the edge work; the node latents keep ``channels``.
+
+    Run time (not hyperparameters): :attr:`edge_chunk` edges per block when no gradient is
+    taken (0: all at once) and the weights' dtype (``encoder.to(torch.bfloat16)`` computes in
+    bf16; the edge inputs are formed in the inputs' dtype first, the output is cast back).
     """
+
+    #: edges per block of a round without gradients: the block's edge latents stay in cache
+    #: (measured fastest, experiments/benchmarks/encoder_speed.py); 0 processes all at once
+    EDGE_CHUNK = 4096
 
     def __init__(
         self,
@@ -136,6 +160,7 @@ class InteractionEncoder(nn.Module):
         noise_channels: int = 0,
         noise_into: str = "rounds",
         noise_neighbours: bool = False,
+        pair_channels: int | None = None,
     ):
         super().__init__()
         if rounds < 1:
@@ -144,17 +169,19 @@ class InteractionEncoder(nn.Module):
         self.static_features = int(static_features)
         self.edge_history = max(1, min(int(edge_history), self.history_len))
         m = self.edge_history
-        self.node_in = mlp(3 * self.history_len + self.static_features, channels, channels)
-        self.edge_in = mlp(3 + 3 + 4 * m, channels, channels)
-        c = channels
-        self.message = nn.ModuleList(PairMLP(c, c, c, c) for _ in range(rounds))
+        c = int(channels)
+        pc = c if pair_channels is None else int(pair_channels)
+        if pc < 1:
+            raise ValueError(f"pair_channels must be >= 1 (or None: channels), got {pair_channels}")
+        self.edge_chunk = self.EDGE_CHUNK
+        self.node_in = mlp(3 * self.history_len + self.static_features, c, c)
+        self.edge_in = mlp(3 + 3 + 4 * m, pc, pc)
+        self.message = nn.ModuleList(PairMLP(c, pc, pc, pc) for _ in range(rounds))
         # the edges are updated between rounds (the last round's update would be unused)
         self.edge_update = nn.ModuleList(
-            PairMLP(c, c, c, c) for _ in range(rounds - 1 if edge_updates else 0)
+            PairMLP(c, pc, pc, pc) for _ in range(rounds - 1 if edge_updates else 0)
         )
-        self.node_update = nn.ModuleList(
-            mlp(2 * channels, channels, channels) for _ in range(rounds)
-        )
+        self.node_update = nn.ModuleList(mlp(c + pc, c, c) for _ in range(rounds))
         self.noise_channels = int(noise_channels)
         if self.noise_channels < 0:
             raise ValueError(f"noise_channels must be >= 0, got {noise_channels}")
@@ -207,6 +234,7 @@ class InteractionEncoder(nn.Module):
         """history ``(B, N, K, 3)``, static ``(B, N, S)`` or None, noise ``(B, N, Z)`` or None
         (zero) -> ``(B, N, 1, channels)``."""
         b, n, k, _ = history.shape
+        dtype = self.node_in[0].weight.dtype
         if k != self.history_len:
             raise ValueError(f"encoder built for history {self.history_len}, got {k}")
         if graph.n_nodes != b * n:
@@ -217,8 +245,8 @@ class InteractionEncoder(nn.Module):
             if static is None or static.shape[-1] != self.static_features:
                 raise ValueError(f"encoder expects {self.static_features} static features")
             node = torch.cat([node, static.reshape(b * n, -1).to(node.dtype)], dim=-1)
-        h = self.node_in(node)
-        e = self.edge_in(self.edge_inputs(flat, graph))
+        h = self.node_in(node.to(dtype))
+        e = self.edge_in(self.edge_inputs(flat, graph).to(dtype))
         z = self._noise(noise, b, n)
         index = graph.edge_index
         if z is not None and self.noise_neighbours:
@@ -231,14 +259,44 @@ class InteractionEncoder(nn.Module):
         ):
             if z is not None and r in self.noise_places:
                 h = h + self.noise_embedding[self.noise_places.index(r)](z)
-            msg = message(h, e, index)
-            if r < len(self.edge_update):
-                e = e + self.edge_update[r](h, msg, index)
-            incoming = torch.zeros_like(h).index_add_(0, index[0], msg)
+            update = self.edge_update[r] if r < len(self.edge_update) else None
+            incoming, e = self._pairs(message, update, h, e, index)
             h = h + node_update(torch.cat([h, incoming], dim=-1))
         if z is not None and len(self.message) in self.noise_places:
             h = h + self.noise_embedding[-1](z)
-        return h.reshape(b, n, 1, -1)
+        return h.reshape(b, n, 1, -1).to(history.dtype)
+
+    def _pairs(
+        self,
+        message: PairMLP,
+        update: PairMLP | None,
+        h: torch.Tensor,
+        e: torch.Tensor,
+        index: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """One round's pair work: h ``(nodes, C)``, e ``(E, P)`` -> the summed incoming
+        messages ``(nodes, P)`` and the (updated) edge latents ``(E, P)``. Without gradients
+        the edges go in blocks of :attr:`edge_chunk` (each block's message, edge update and
+        sum while its latents are in cache; the edge latents are updated in place): the same
+        sums in another order, equal to round-off."""
+        terms = message.node_terms(h)
+        update_terms = None if update is None else update.node_terms(h)
+        n_edges = index.shape[1]
+        chunk = int(self.edge_chunk)
+        incoming = h.new_zeros(h.shape[0], message.out.out_features)
+        if torch.is_grad_enabled() or chunk <= 0 or n_edges <= chunk:
+            msg = message.edges(terms, e, index)
+            if update_terms is not None:
+                e = e + update.edges(update_terms, msg, index)
+            return incoming.index_add_(0, index[0], msg), e
+        for start in range(0, n_edges, chunk):
+            block = slice(start, start + chunk)
+            idx = index[:, block]
+            msg = message.edges(terms, e[block], idx)
+            if update_terms is not None:
+                e[block] += update.edges(update_terms, msg, idx)
+            incoming.index_add_(0, idx[0], msg)
+        return incoming, e
 
     def _noise(self, noise: torch.Tensor | None, b: int, n: int) -> torch.Tensor | None:
         """The noise as ``(B * N, Z)`` in the latents' dtype, or None (zero noise or a

@@ -103,6 +103,7 @@ class EncoderSchema:
     noise_channels: int = 0
     noise_into: str = "rounds"
     noise_neighbours: bool = False
+    pair_channels: Optional[int] = None
 
 
 @dataclass

@@ -1,0 +1,172 @@
+"""The interaction encoder's forward pass: what each lever costs, side by side in one process.
+
+    python experiments/benchmarks/encoder_speed.py [--scene pbc] [--sizes 2000 32000]
+        [--threads 1] [--repeats 5] [--json out.json]
+
+On the scene's default dataset (tiled along y and z for more particles, as in
+``surrogate_speed.py``), one observed state's contact graph at each cut-off, and the default
+encoder's shape (64 channels, 4 rounds, history 10, untrained weights: the same operations and
+time as trained ones), the fastest of ``--repeats`` forward passes without gradients, in ms
+per pass and per particle, for:
+
+- ``reference``: 64-channel pair latents, edge updates, all edges at once, fp32;
+- the levers one by one and together: edge updates off, narrower pair latents
+  (``pair_channels``), the 1.15 d cut-off, edges in cache-sized blocks (``edge_chunk``), bf16
+  weights (where the CPU has bf16 units: ``gripdem.inference.precision``).
+
+Each row also prints its largest deviation from the same weights' reference-order output where
+that exists (the chunked rounds and bf16 against the same model unchunked in fp32).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+from benchlib import fmt, machine_line, markdown_table, scene_dataset, set_threads, tile_frames
+
+from gripdem.boundary import neighbour_pairs
+from gripdem.data.dataset_io import read_meta
+from gripdem.inference.precision import bf16_supported
+from gripdem.nn.interaction import ContactGraph, InteractionEncoder
+
+HISTORY = 10
+
+
+def state(scene: str, factor: int):
+    """``(history (1, N, K, 3) float32 in unit-ish velocity scale, positions (N, 3), meta,
+    boundary)`` of the last frames of the scene's test simulation, tiled ``factor`` times."""
+    path = scene_dataset(scene, "default")
+    meta = read_meta(path)
+    with h5py.File(path, "r") as h5:
+        pos = np.asarray(h5["positions"][meta.n_sims - 1, -(HISTORY + 1) :], np.float64)
+        times = np.asarray(h5["times"][meta.n_sims - 1, -(HISTORY + 1) :], np.float64)
+    tiled, boundary = tile_frames(pos, meta.boundary, factor, times)
+    steps = np.diff(tiled, axis=0)
+    steps -= np.round(steps / boundary.box.lengths) * boundary.box.lengths  # no LE jumps here
+    history = steps.transpose(1, 0, 2) / max(float(np.std(steps)), 1e-30)
+    offset = float(boundary.offset(times[-1:])[0])
+    return torch.from_numpy(history[None].astype(np.float32)), tiled[-1], offset, meta, boundary
+
+
+def contact_graph(positions, boundary, offset: float, cutoff: float, d: float) -> ContactGraph:
+    i, j, vec = neighbour_pairs(positions, boundary.box, offset, cutoff * d)
+    i, j, vec = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([vec, -vec]) / d
+    order = np.argsort(i, kind="stable")
+    i, j, vec = i[order], j[order], vec[order]
+    gap = np.sqrt((vec**2).sum(1)) - 1.0
+    return ContactGraph(
+        torch.from_numpy(np.stack([i, j]).astype(np.int64)),
+        torch.from_numpy(vec.astype(np.float32)),
+        torch.from_numpy(gap.astype(np.float32)),
+        cutoff,
+        len(positions),
+    )
+
+
+def best_ms(encoder, history, static, graph, repeats: int) -> tuple[float, torch.Tensor]:
+    with torch.no_grad():
+        out = encoder(history, static, graph)
+        walls = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            encoder(history, static, graph)
+            walls.append(time.perf_counter() - start)
+    return 1e3 * min(walls), out.float()
+
+
+def variants(bf16: bool) -> list[tuple[str, dict, float, int, bool]]:
+    """(label, encoder options, cut-off, edge chunk, bf16)."""
+    ref = {"channels": 64, "rounds": 4, "edge_updates": True, "pair_channels": None}
+    lean = {**ref, "edge_updates": False, "pair_channels": 32}
+    rows = [
+        ("reference (64 pair ch., edge updates, 1.3 d)", ref, 1.3, 0, False),
+        ("chunked rounds (4096 edges)", ref, 1.3, 4096, False),
+        ("edge updates off", {**ref, "edge_updates": False}, 1.3, 0, False),
+        ("pair channels 32", {**ref, "pair_channels": 32}, 1.3, 0, False),
+        ("cut-off 1.15 d", ref, 1.15, 0, False),
+        ("off + 32 ch.", lean, 1.3, 0, False),
+        ("off + 32 ch. + chunked", lean, 1.3, 4096, False),
+        ("off + 32 ch. + 1.15 d + chunked", lean, 1.15, 4096, False),
+    ]
+    if bf16:
+        rows += [
+            ("reference, bf16", ref, 1.3, 0, True),
+            ("off + 32 ch. + chunked, bf16", lean, 1.3, 4096, True),
+            ("off + 32 ch. + 1.15 d + chunked, bf16", lean, 1.15, 4096, True),
+        ]
+    return rows
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="pbc", choices=["pbc", "lebc"])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[2000, 32000])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--chunks", type=int, nargs="*", default=[], help="also time these chunks")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    set_threads(args.threads)
+    bf16 = bf16_supported()
+    report = {"scene": args.scene, "bf16_supported": bf16, "rows": []}
+    tables = []
+    for n in args.sizes:
+        history, positions, offset, meta, boundary = state(args.scene, n // 2000)
+        static = None
+        graphs = {
+            c: contact_graph(positions, boundary, offset, c, meta.diameter) for c in (1.3, 1.15)
+        }
+        rows, reference = [], {}
+        rows_spec = variants(bf16) + [
+            (f"reference, chunk {c}", variants(False)[0][1], 1.3, c, False) for c in args.chunks
+        ]
+        for label, options, cutoff, chunk, half in rows_spec:
+            torch.manual_seed(0)
+            encoder = InteractionEncoder(HISTORY, 0, edge_history=3, **options).eval()
+            key = (tuple(sorted(options.items(), key=str)), cutoff)
+            encoder.edge_chunk = chunk
+            if half:
+                encoder.to(torch.bfloat16)
+            ms, out = best_ms(encoder, history, static, graphs[cutoff], args.repeats)
+            if key not in reference:
+                reference[key] = out
+            deviation = (out - reference[key]).abs().max().item() / reference[key].abs().max()
+            edges = graphs[cutoff].edge_index.shape[1]
+            rows.append([label, fmt(ms), fmt(1e3 * ms / n), edges, f"{deviation.item():.1e}"])
+            report["rows"].append(
+                {
+                    "particles": n,
+                    "variant": label,
+                    "ms": ms,
+                    "edges": edges,
+                    "relative_deviation": float(deviation),
+                }
+            )
+            print(f"{n} {label}: {ms:.2f} ms", flush=True)
+        base = report["rows"][-len(rows)]["ms"]
+        for row, rec in zip(rows, report["rows"][-len(rows) :], strict=True):
+            row.insert(2, fmt(base / rec["ms"]))
+        tables.append(
+            f"### {args.scene}, {n} particles, {args.threads} thread(s)\n\n"
+            + markdown_table(
+                ["encoder", "ms / pass", "speed-up", "us / particle", "edges", "max dev / max"],
+                rows,
+            )
+        )
+    header = machine_line() + f"; bf16 units: {'yes' if bf16 else 'no'}"
+    print("\n" + header + "\n\n" + "\n\n".join(tables))
+    report["machine"] = header
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2))
+    return report
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -46,7 +46,25 @@ def test_surrogate_quick(run_script, tmp_path):
     assert {(r["scene"], r["particles"]) for r in report["rows"]} == {
         (s, n) for s in ("pbc", "lebc") for n in (400, 1600)
     }
-    assert "steps per frame" in out
+    assert "steps per frame" in out and "÷ LAMMPS" in out
+    for row in report["rows"]:  # the model's time broken into the stepper's parts
+        parts = row["model"]["parts_s_per_frame"]
+        assert 0 < sum(parts.values()) <= row["model"]["s_per_frame"] * 1.001
+        assert row["model"]["precision"] in ("fp32", "bf16")
+
+
+def test_encoder_speed_quick(run_script, tmp_path):
+    """Every lever's row; the chunked rounds give the unchunked output, bf16 stays within its
+    stated tolerance of fp32 (the same weights and inputs)."""
+    run_script("benchmarks/encoder_speed", "--json", str(tmp_path / "e.json"))
+    rows = json.loads((tmp_path / "e.json").read_text())["rows"]
+    assert {r["particles"] for r in rows} == {400, 1600}
+    for row in rows:
+        assert row["ms"] > 0
+        if "chunked" in row["variant"] and "bf16" not in row["variant"]:
+            assert row["relative_deviation"] < 1e-5, row
+        if "bf16" in row["variant"]:
+            assert row["relative_deviation"] < 0.03, row
 
 
 def test_scaling_quick(run_script, tmp_path):

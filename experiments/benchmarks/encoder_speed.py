@@ -1,7 +1,8 @@
 """The interaction encoder's forward pass: what each lever costs, side by side in one process.
 
     python experiments/benchmarks/encoder_speed.py [--scene pbc] [--sizes 2000 32000]
-        [--threads 1] [--repeats 5] [--json out.json]
+        [--threads 1] [--repeats 5] [--chunks 2048 8192] [--json out.json]
+    python experiments/benchmarks/encoder_speed.py --quick  # tiny scene, 400 and 1600 particles
 
 On the scene's default dataset (tiled along y and z for more particles, as in
 ``surrogate_speed.py``), one observed state's contact graph at each cut-off, and the default
@@ -39,10 +40,11 @@ from gripdem.nn.interaction import ContactGraph, InteractionEncoder
 HISTORY = 10
 
 
-def state(scene: str, factor: int):
-    """``(history (1, N, K, 3) float32 in unit-ish velocity scale, positions (N, 3), meta,
-    boundary)`` of the last frames of the scene's test simulation, tiled ``factor`` times."""
-    path = scene_dataset(scene, "default")
+def state(scene: str, factor: int, preset: str = "default"):
+    """``(history (1, N, K, 3) float32 in unit-ish velocity scale, positions (N, 3), LE offset,
+    meta, boundary)`` of the last frames of the scene's test simulation, tiled ``factor``
+    times."""
+    path = scene_dataset(scene, preset)
     meta = read_meta(path)
     with h5py.File(path, "r") as h5:
         pos = np.asarray(h5["positions"][meta.n_sims - 1, -(HISTORY + 1) :], np.float64)
@@ -111,14 +113,21 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--chunks", type=int, nargs="*", default=[], help="also time these chunks")
+    ap.add_argument("--quick", action="store_true", help="tiny scene, 400 and 1600 particles")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     set_threads(args.threads)
+    preset = "tiny" if args.quick else "default"
+    n0 = read_meta(scene_dataset(args.scene, preset)).n_particles
+    if args.quick:
+        args.sizes, args.repeats = [n0, 4 * n0], 1
     bf16 = bf16_supported()
     report = {"scene": args.scene, "bf16_supported": bf16, "rows": []}
     tables = []
     for n in args.sizes:
-        history, positions, offset, meta, boundary = state(args.scene, n // 2000)
+        if n % n0:
+            raise ValueError(f"--sizes: {n} is not a multiple of the data's {n0} particles")
+        history, positions, offset, meta, boundary = state(args.scene, n // n0, preset)
         static = None
         graphs = {
             c: contact_graph(positions, boundary, offset, c, meta.diameter) for c in (1.3, 1.15)

@@ -163,10 +163,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument(
         "--precision",
-        default="fp32",
+        default="auto",
         choices=["auto", "fp32", "bf16"],
-        help="the encoder's arithmetic: bf16 where the device computes it natively (CPU "
-        "avx512_bf16 or AMX, CUDA 8.0+; auto picks it there, fp32 elsewhere)",
+        help="the encoder's arithmetic (default auto: bf16 where the device computes it "
+        "natively: CPU avx512_bf16 or AMX, CUDA 8.0+; fp32 elsewhere; the same 190-10 accuracy "
+        "to 4 digits, experiments/analyses/precision_accuracy.py); the report records it",
     )
     p.add_argument("--threads", type=int, metavar="T", help="torch CPU threads")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")

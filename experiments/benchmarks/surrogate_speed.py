@@ -2,7 +2,7 @@
 
     python experiments/benchmarks/surrogate_speed.py [--checkpoint pbc=pretrained:pbc
         lebc=...] [--scenes pbc lebc] [--sizes 2000 8000 32000 64000] [--dem-frames 2]
-        [--threads 1] [--precision fp32] [--no-lammps] [--memory-budget-gb 8] [--json out.json]
+        [--threads 1] [--precision auto] [--no-lammps] [--memory-budget-gb 8] [--json out.json]
     python experiments/benchmarks/surrogate_speed.py --quick  # tiny scene, 400 and 1600 particles
 
 States of more particles are the scene's default dataset tiled along y and z (2 x 2 copies
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--repeats", type=int, default=3, help="model rollouts timed (best)")
     ap.add_argument("--links", type=int, default=5, help="horizons chained per timed rollout")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--precision", default="fp32", choices=PRECISIONS)
+    ap.add_argument("--precision", default="auto", choices=PRECISIONS, help="as predict")
     ap.add_argument("--no-lammps", action="store_true", help="time the built-in DEM only")
     ap.add_argument("--memory-budget-gb", type=float, default=8.0)
     ap.add_argument("--quick", action="store_true", help="tiny scene, 400 and 1600 particles")

@@ -118,6 +118,7 @@ class ModelSchema:
     layers: int = 2
     n_heads: int = 2
     decoder_dropout: float = 0.0
+    fast_steps: int = 1820
     lr: float = 1e-4
     weight_decay: float = 0.0
     lr_schedule: LrSchedule = LrSchedule.constant

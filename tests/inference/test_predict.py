@@ -16,6 +16,7 @@ from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
 from gripdem.evaluation.evaluate import evaluate_predictions
 from gripdem.evaluation.predictions import read_predictions
 from gripdem.inference.checkpoint import IncompatibleError, check_compatible, training_overlap
+from gripdem.inference.precision import resolve_precision
 from gripdem.predict import main
 
 
@@ -63,6 +64,9 @@ def test_predict_corrects_contacts_by_default(tmp_path, le_file, le_checkpoint):
     assert run(le_checkpoint, le_file, out, "--start", 25, "--frames", 12) == 0
     report = json.loads((tmp_path / "pred_rollout.json").read_text())
     assert report["settings"]["contact_correction"] is True
+    # the encoder's precision: auto by default, bf16 where the CPU has bf16 units
+    assert report["settings"]["precision"] == "auto"
+    assert report["precision"] == resolve_precision("auto")
     trajectory = read_dataset(tmp_path / "pred_trajectory.h5")
     offsets = trajectory.offsets()
     d = trajectory.diameter

@@ -80,9 +80,12 @@ def test_custom_split_and_defaults():
     )
     assert default.data.history_len == 10  # experiment=fast is the default preset
     # a step budget: one simulation of the user's gets as many updates as the default six
-    assert (default.trainer.max_steps, default.trainer.max_epochs) == (1820, -1)
+    # (the model's own: the lean interaction encoder takes twice the steps of the paper models)
+    assert (default.trainer.max_steps, default.trainer.max_epochs) == (3640, -1)
+    assert compose_run(["model=vct"]).trainer.max_steps == 1820
+    assert compose_run(["trainer.max_steps=50"]).trainer.max_steps == 50
     # the data's graph cut-off follows the encoder (one source of truth)
-    assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.3
+    assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.15
     assert compose_run(["model=grip_paper"]).data.graph_cutoff == 3.0
     assert compose_run(["model=vct"]).data.encoding.value == "unwrapped"
 

@@ -1,0 +1,115 @@
+"""The speed levers' ablation table: accuracy and training time of trained runs beside the
+encoder's forward time of the same form (``encoder_speed.py``'s JSON).
+
+    python experiments/analyses/speed_ablation.py --runs-root RUNS --encoder-json E.json
+        [--out experiments/results/speed_ablation]
+
+``RUNS`` holds one ``python -m gripdem.run`` output folder per run, named
+``<scene>_<variant>_s<seed>`` (``metrics.json`` in each); the variants and their encoder rows are
+listed in :data:`VARIANTS`. Per variant and scene: 190-10 test RMSE / CV's (mean ± std over the
+seeds present, each seed listed), the training steps and wall time (the machine was shared with
+the other runs and benchmarks of the day: read the times as rough), and the encoder's forward
+time at 2000 and 32 000 particles (one thread, untrained weights, fp32 and bf16 where measured).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: run-name variant -> (label, encoder_speed row label or None)
+VARIANTS = {
+    "ref": ("64 pair ch., edge updates, 1.3 d, 1820 steps (before)", "reference (64 pair ch., "
+            "edge updates, 1.3 d)"),
+    "c115": ("cut-off 1.15 d", "cut-off 1.15 d"),
+    "p32": ("pair channels 32", "pair channels 32"),
+    "off": ("edge updates off", "edge updates off"),
+    "off32": ("edge updates off + pair channels 32", "off + 32 ch."),
+    "lean": ("lean: off + 32 ch. + 1.15 d, 1820 steps", "off + 32 ch. + 1.15 d + chunked"),
+    "lean3640": ("lean, 3640 steps (the new default)", "off + 32 ch. + 1.15 d + chunked"),
+    "refbf16": ("64 pair ch. (before), trained in bf16-mixed", None),
+}  # fmt: skip
+
+
+def collect(root: Path) -> dict:
+    runs: dict = {}
+    for path in sorted(root.glob("*/metrics.json")):
+        scene, *variant, seed = path.parent.name.split("_")
+        metrics = json.loads(path.read_text())
+        runs.setdefault(("_".join(variant), scene), []).append(
+            {
+                "seed": int(seed.lstrip("s")),
+                "ratio": metrics["test/rmse_ratio_constant_velocity"],
+                "seconds": metrics["train_seconds"],
+                "steps": metrics["steps"],
+            }
+        )
+    return runs
+
+
+def encoder_ms(report: dict | None, label: str | None, n: int, bf16: bool) -> str:
+    if report is None or label is None:
+        return "–"
+    want = f"{label}, bf16" if bf16 else label
+    if bf16 and "chunked" not in label:
+        want = {"reference (64 pair ch., edge updates, 1.3 d)": "reference, bf16"}.get(label, want)
+    for row in report["rows"]:
+        if row["particles"] == n and row["variant"] == want:
+            return f"{row['ms']:.3g}"
+    return "–"
+
+
+def main(argv: list[str] | None = None) -> str:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs-root", type=Path, required=True)
+    ap.add_argument("--encoder-json", type=Path, default=None)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    runs = collect(args.runs_root)
+    enc = json.loads(args.encoder_json.read_text()) if args.encoder_json else None
+    rows = [
+        "| variant | pbc 190-10 ÷ CV (seeds) | lebc 190-10 ÷ CV (seeds) | steps | train s (pbc, "
+        "shared machine) | encoder ms 2000 fp32 / bf16 | encoder ms 32 000 fp32 / bf16 |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for key, (label, enc_label) in VARIANTS.items():
+        cells = []
+        for scene in ("pbc", "lebc"):
+            found = runs.get((key, scene), [])
+            if not found:
+                cells.append("–")
+                continue
+            values = np.array([r["ratio"] for r in found])
+            each = ", ".join(f"{r['ratio']:.3f}" for r in sorted(found, key=lambda r: r["seed"]))
+            spread = f" ± {values.std(ddof=1):.3f}" if len(values) > 1 else ""
+            cells.append(f"{values.mean():.3f}{spread} ({each})")
+        pbc = runs.get((key, "pbc"), [])
+        if not pbc and not runs.get((key, "lebc")):
+            continue
+        steps = ", ".join(sorted({str(r["steps"]) for r in pbc})) or "–"
+        seconds = ", ".join(f"{r['seconds']:.0f}" for r in pbc) or "–"
+        timing = [
+            f"{encoder_ms(enc, enc_label, n, False)} / {encoder_ms(enc, enc_label, n, True)}"
+            for n in (2000, 32000)
+        ]
+        rows.append(
+            f"| {label} | {cells[0]} | {cells[1]} | {steps} | {seconds} | "
+            + " | ".join(timing)
+            + " |"
+        )
+    text = "\n".join(rows)
+    print(text)
+    if args.out:
+        args.out.with_suffix(".md").write_text(text + "\n")
+        args.out.with_suffix(".json").write_text(
+            json.dumps({f"{k[0]}/{k[1]}": v for k, v in runs.items()}, indent=2)
+        )
+    return text
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -78,7 +78,13 @@ def test_ckpt_and_model_file_predict_the_same(tmp_path, le_file, moved):
     a, b = outputs["ckpt"], outputs["safetensors"]
     assert sorted(a) == sorted(b)
     for key in a:
-        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+        if key.startswith("baseline/"):
+            # recomputed in float64 by each run: torch's vectorised sin/cos (the mean-flow
+            # profile) can differ in the last bit with the arrays' memory alignment (measured
+            # 2e-14 relative in 1 of 4 runs)
+            np.testing.assert_allclose(a[key], b[key], rtol=1e-12, atol=0, err_msg=key)
+        else:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
     cv = a["baseline/constant_velocity"]
     assert np.abs(a["pred_positions"] - cv).max() > 0  # the moved weights do matter
 

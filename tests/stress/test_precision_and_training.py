@@ -32,8 +32,10 @@ from gripdem.evaluation.metrics import rmse
 # bf16 autocast on the CPU
 # --------------------------------------------------------------------------------------------
 #: bf16 keeps 8 significant bits (relative rounding 2^-9): what the network adds to constant
-#: velocity may change by 2 % under autocast, and the RMSE by 1 %
-BF16_CORRECTION_TOLERANCE = 0.02
+#: velocity may change by 4 % under autocast (measured under ATEN_CPU_CAPABILITY=default|avx2|
+#: avx512, 1 and 2 threads: grip 0.31 %, the lean interaction encoder 1.5 % pbc and 2.5 % lebc),
+#: and the RMSE by 1 %
+BF16_CORRECTION_TOLERANCE = 0.04
 BF16_RMSE_TOLERANCE = 0.01
 PERTURB_SCALE = {"interaction": 0.1, "grip": 0.05}
 
@@ -43,8 +45,8 @@ PERTURB_SCALE = {"interaction": 0.1, "grip": 0.05}
 def test_bf16_autocast_on_cpu_stays_within_tolerance_of_float32(request, scene, model_name):
     """Tried: the test windows of a perturbed model (every weight moved, so the network's
     output matters) run under ``torch.autocast("cpu", bfloat16)``; decoding stays float64.
-    Held: the positions differ from float32 by at most 2 % of the network's correction to
-    constant velocity (RMS; measured 0.3-0.9 %), and the RMSE by at most 1 % (measured
+    Held: the positions differ from float32 by at most 4 % of the network's correction to
+    constant velocity (RMS; measured 0.3-2.5 %), and the RMSE by at most 1 % (measured
     1e-5)."""
     path = request.getfixturevalue(f"tiny_{scene}_path")
     model, dm = smoke_model(path, f"scene={scene}", f"model={model_name}")

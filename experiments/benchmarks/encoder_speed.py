@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from benchlib import fmt, machine_line, markdown_table, scene_dataset, set_threads, tile_frames
 
-from gripdem.boundary import neighbour_pairs
+from gripdem.boundary import lattice_continuous_steps, neighbour_pairs
 from gripdem.data.dataset_io import read_meta
 from gripdem.inference.precision import bf16_supported
 from gripdem.nn.interaction import ContactGraph, InteractionEncoder
@@ -50,10 +50,13 @@ def state(scene: str, factor: int, preset: str = "default"):
         pos = np.asarray(h5["positions"][meta.n_sims - 1, -(HISTORY + 1) :], np.float64)
         times = np.asarray(h5["times"][meta.n_sims - 1, -(HISTORY + 1) :], np.float64)
     tiled, boundary = tile_frames(pos, meta.boundary, factor, times)
-    steps = np.diff(tiled, axis=0)
-    steps -= np.round(steps / boundary.box.lengths) * boundary.box.lengths  # no LE jumps here
-    history = steps.transpose(1, 0, 2) / max(float(np.std(steps)), 1e-30)
-    offset = float(boundary.offset(times[-1:])[0])
+    offsets = boundary.offset(times)
+    # (N, K, 3): the model's steps (LE-exact across the x faces), in units of their spread
+    steps = lattice_continuous_steps(
+        tiled.transpose(1, 0, 2), boundary.box, offsets if boundary.is_lees_edwards else None
+    )
+    history = steps / max(float(np.std(steps)), 1e-30)
+    offset = float(offsets[-1])
     return torch.from_numpy(history[None].astype(np.float32)), tiled[-1], offset, meta, boundary
 
 

@@ -1,3 +1,70 @@
-"""gripdem: graph-based interaction-aware trajectory forecasts for DEM unit cells."""
+"""gripdem: graph-based interaction-aware trajectory forecasts for DEM unit cells.
 
-__version__ = "0.1.0"
+The Python API (:mod:`gripdem.api`) is re-exported here and imported on first use, so
+``import gripdem`` stays fast and imports no torch.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from gripdem._version import __version__
+
+if TYPE_CHECKING:
+    from gripdem.api import (
+        Model,
+        RolloutResult,
+        Scene,
+        Surrogate,
+        Trajectory,
+        load_model,
+        physics_report,
+        read_trajectory,
+        simulate,
+        write_trajectory,
+    )
+
+#: the names of :mod:`gripdem.api` available as ``gripdem.<name>``
+API_NAMES = (
+    "Model",
+    "RolloutResult",
+    "Scene",
+    "Surrogate",
+    "Trajectory",
+    "load_model",
+    "physics_report",
+    "read_trajectory",
+    "simulate",
+    "write_trajectory",
+)
+
+__all__ = [
+    "__version__",
+    "Model",
+    "RolloutResult",
+    "Scene",
+    "Surrogate",
+    "Trajectory",
+    "load_model",
+    "physics_report",
+    "read_trajectory",
+    "simulate",
+    "write_trajectory",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in API_NAMES:
+        from gripdem import api
+
+        return getattr(api, name)
+    if name != "api":
+        from gripdem import api
+
+        if name in api.DEPRECATED:
+            return getattr(api, name)
+    raise AttributeError(f"module 'gripdem' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(API_NAMES))

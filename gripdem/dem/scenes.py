@@ -25,7 +25,7 @@ from queue import Empty
 import numpy as np
 from tqdm.auto import tqdm
 
-import gripdem
+from gripdem._version import __version__
 from gripdem.data.schema import TrajectoryData
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.engine import Simulation
@@ -209,7 +209,7 @@ def generate(
         provenance={
             "generator": GENERATOR_NAME,
             "version": GENERATOR_VERSION,
-            "package_version": gripdem.__version__,
+            "package_version": __version__,
             "parameters": config.to_dict(),
             "derived": config.describe(),
             "max_overlap_all_steps": [r.max_overlap for r in results],

@@ -96,7 +96,7 @@ def _structure(positions, offsets, frames, boundary, diameter):
     return hist, coordination
 
 
-def _msd(non_affine: np.ndarray, starts: range, lag: int) -> float:
+def lag_msd(non_affine: np.ndarray, starts, lag: int) -> float:
     """Mean squared sum of ``lag`` consecutive steps ``(S, N, 3)``, from each of ``starts``."""
     total = np.concatenate([np.zeros_like(non_affine[:1]), np.cumsum(non_affine, axis=0)])
     starts = [s for s in starts if s + lag <= len(non_affine)]
@@ -152,7 +152,7 @@ def block_statistics(
             full = steps[k][0].copy()
             full[..., 2] -= profile_basis(steps[k][1], boundary) @ fits["truth"]
             for lag in LAGS:
-                row[f"{k}/msd_{lag}_over_d2"] = _msd(full / d, range(lo, hi), lag)
+                row[f"{k}/msd_{lag}_over_d2"] = lag_msd(full / d, range(lo, hi), lag)
         h_m, h_t = structure["model"][0], structure["truth"][0]
         row["gr_l1"] = float(np.abs(h_m - h_t).sum() / max(h_t.sum(), 1.0))
         truth_rms = row["truth/rms_non_affine_over_d"]

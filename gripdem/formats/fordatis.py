@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-import gripdem
+from gripdem._version import __version__
 from gripdem.boundary import Boundary, Box, check_volume_fraction, wrap_positions
 from gripdem.data.schema import TIME_RTOL, TrajectoryData, validate
 from gripdem.formats.drive import check_amplitude, check_periodic, drive_lines
@@ -221,7 +221,7 @@ def read_fordatis(
         body_force_amplitude=amplitude,
         provenance={
             "generator": "gripdem.formats.fordatis",
-            "version": gripdem.__version__,
+            "version": __version__,
             "parameters": {
                 "source": str(source),
                 "files": [sim.name for sim in sims],

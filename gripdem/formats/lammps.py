@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-import gripdem
+from gripdem._version import __version__
 from gripdem.boundary import (
     Boundary,
     Box,
@@ -262,7 +262,7 @@ def read_lammps(
         radii=radii,
         provenance={
             "generator": "gripdem.formats.lammps",
-            "version": gripdem.__version__,
+            "version": __version__,
             "parameters": {
                 "files": [[str(p) for p in g] for g in groups],
                 "timestep": timestep,

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import torch
 
-import gripdem
+from gripdem._version import __version__
 from gripdem.data.h5io import atomic_path
 
 FORMAT = "gripdem-model"
@@ -100,7 +100,7 @@ def save_model_file(
             "format_version": str(FORMAT_VERSION),
             "hparams": json.dumps(plain(hparams, "hparams"), sort_keys=True),
             "card": json.dumps(plain(dict(card or {}), "card"), sort_keys=True),
-            "gripdem_version": gripdem.__version__,
+            "gripdem_version": __version__,
             "tensors_sha256": tensors_digest(tensors),
         }
     except TypeError as exc:

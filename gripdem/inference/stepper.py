@@ -95,28 +95,52 @@ class Stepper:
         self.model = model.eval()
         if self.settings.compile:
             compile_encoder(model)
+        self.stopped: str | None = None
+        self._pending: list | None = None  # the current link: frames, times, offsets, next, carry
         self.k = int(model.hparams.history_len)
         self.f = int(model.hparams.horizon)
         self.link = self.f if self.settings.link is None else int(self.settings.link)
         if not 1 <= self.link <= self.f:
             raise ValueError(f"link must lie in 1..{self.f} (the model's horizon), got {self.link}")
+        self.boundary = model.boundary
+        self.box = model.boundary.box
+        self.d = float(model.diameter)
+        self.dt = float(model.hparams.scene["frame_interval"])
+        self.cutoff = float(model.hparams.graph_cutoff) * self.d
+        self.radius = max(self.cutoff, self.settings.contact_distance * self.d)
+        self.set_state(observed, times)
+        self.seconds = dict.fromkeys(PARTS, 0.0)
+        self.report = StepReport()
+        self.n_predicted = 0
+        self.device = next(model.parameters()).device
+
+    def set_state(self, observed: np.ndarray, times: np.ndarray) -> None:
+        """Continue from ``observed`` frames ``(S, K+1, N, 3)`` at ``times`` ``(S, K+1)``
+        instead of the state so far (a coupled code hands its state back): the neighbour
+        lists are rebuilt at the newest frame and a link in progress is dropped. The number
+        of simulations may not change; timings and the correction report keep accumulating."""
         observed = np.asarray(observed, dtype=np.float64)
+        times = np.asarray(times, dtype=np.float64)
         if observed.ndim != 4 or observed.shape[1] != self.k + 1 or observed.shape[-1] != 3:
             raise ValueError(
                 f"the model reads {self.k + 1} observed frames: expected (sims, {self.k + 1}, "
                 f"particles, 3), got {observed.shape}"
             )
-        self.boundary = model.boundary
-        self.box = model.boundary.box
-        self.d = float(model.diameter)
-        self.dt = float(model.hparams.scene["frame_interval"])
+        if times.shape != observed.shape[:2]:
+            raise ValueError(
+                f"times must be {observed.shape[:2]} (sims, frames), got {times.shape}"
+            )
+        if hasattr(self, "frames") and len(observed) != len(self.frames):
+            raise ValueError(
+                f"a state of {len(self.frames)} simulations expected, got {len(observed)}"
+            )
+        if not (np.isfinite(observed).all() and np.isfinite(times).all()):
+            raise ValueError("the state's positions and times must be finite (NaN or Inf found)")
         self.frames = observed.copy()
-        self.times = np.asarray(times, dtype=np.float64).copy()
-        self.cutoff = float(model.hparams.graph_cutoff) * self.d
-        radius = max(self.cutoff, self.settings.contact_distance * self.d)
+        self.times = times.copy()
         self.lists = [
             NeighbourList(
-                self.box, radius, self.settings.skin * self.d, self.boundary.image_velocity
+                self.box, self.radius, self.settings.skin * self.d, self.boundary.image_velocity
             )
             for _ in range(len(observed))
         ]
@@ -124,12 +148,8 @@ class Stepper:
             nl.build(
                 self.frames[s, -1], float(self.offsets(self.times[s, -1:])[0]), self.times[s, -1]
             )
-        self.seconds = dict.fromkeys(PARTS, 0.0)
-        self.report = StepReport()
-        self.stopped: str | None = None
-        self.n_predicted = 0
-        self._pending: list | None = None  # the current link: frames, times, offsets, next, carry
-        self.device = next(model.parameters()).device
+        self._pending = None
+        self.stopped = None
 
     def offsets(self, times: np.ndarray) -> np.ndarray:
         return self.boundary.offset(times)

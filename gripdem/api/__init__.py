@@ -1,0 +1,52 @@
+"""gripdem's Python API: the stable names, re-exported at ``gripdem``.
+
+    import gripdem
+    model = gripdem.load_model("pretrained:lebc")
+    data = gripdem.simulate("lebc", preset="tiny", sims=1)
+    run = model.rollout(data.positions[0], data.times[0], frames=100)
+    print(gripdem.physics_report(run.trajectory()).table())
+
+Stability: every name in ``__all__`` keeps its meaning and signature within a major version.
+A name that changes is first kept as a deprecated alias for at least one minor release: it
+still works, warns with a ``DeprecationWarning`` naming its replacement, and is listed in
+``DEPRECATED``. ``import gripdem`` and ``import gripdem.api`` import neither torch nor the
+model code; that happens when a model is loaded or a simulation runs.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+from gripdem.api.coupling import Surrogate
+from gripdem.api.model import Model, RolloutResult, load_model
+from gripdem.api.physics import physics_report, simulate
+from gripdem.api.scene import Scene, Trajectory, read_trajectory, write_trajectory
+
+__all__ = [
+    "Model",
+    "RolloutResult",
+    "Scene",
+    "Surrogate",
+    "Trajectory",
+    "load_model",
+    "physics_report",
+    "read_trajectory",
+    "simulate",
+    "write_trajectory",
+]
+
+#: deprecated name -> (its replacement in ``__all__``, the version that deprecated it)
+DEPRECATED: dict[str, tuple[str, str]] = {}
+
+
+def __getattr__(name: str) -> Any:
+    if name in DEPRECATED:
+        new, since = DEPRECATED[name]
+        warnings.warn(
+            f"gripdem.{name} is deprecated since gripdem {since}: use gripdem.{new}",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]
+    raise AttributeError(f"module 'gripdem.api' has no attribute {name!r}")

@@ -1,0 +1,107 @@
+"""The built-in DEM and the physics report from Python: generate a scene, measure any
+trajectory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from gripdem.api.scene import Trajectory
+
+#: the configuration folder (scenes: ``conf/scene/*.yaml``, sizes: ``conf/preset/*.yaml``)
+CONF_DIR = Path(__file__).resolve().parent.parent.parent / "conf"
+
+
+def _group(group: str, name: str) -> dict[str, Any]:
+    from omegaconf import OmegaConf
+
+    path = CONF_DIR / group / f"{name}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+        raise ValueError(f"{group} {name!r}: no {path}; expected one of {known}")
+    return dict(OmegaConf.to_container(OmegaConf.load(path), resolve=True))
+
+
+def simulate(
+    scene: str = "pbc",
+    preset: str = "tiny",
+    *,
+    sims: int | None = None,
+    seed: int = 0,
+    particles: int | None = None,
+    frames: int | None = None,
+    frame_interval: float | None = None,
+    physics: dict[str, Any] | None = None,
+    backend: str = "numba",
+    workers: int | None = None,
+    progress: bool = False,
+    validate: bool = True,
+) -> Trajectory:
+    """Generate trajectories with the built-in DEM and return them in memory.
+
+    Args:
+        scene: ``"pbc"`` (periodic box, sinusoidal body force) or ``"lebc"`` (Lees-Edwards
+            shear): the physics of ``conf/scene/<scene>.yaml``.
+        preset: the sizes of ``conf/preset/<preset>.yaml`` (``tiny``: 400 particles x 61
+            frames; ``default``: 2000 x 201).
+        sims: independent simulations (default: the preset's); seed: the base seed
+            (simulation ``s`` uses ``SeedSequence(seed).spawn(sims)[s]``, as
+            ``python -m gripdem.simulate``).
+        particles, frames, frame_interval: override the preset's.
+        physics: override scene options (e.g. ``{"friction": 0.5, "shear_rate": 500.0}``).
+        backend: ``"numba"`` (CPU) or ``"torch"``; workers: processes (default one per CPU).
+        validate: run the plausibility checks of ``gripdem.simulate`` and raise when one
+            fails.
+
+    Returns:
+        a :class:`Trajectory` with velocities and the generator's provenance.
+    """
+    from gripdem.dem.config import GeneratorConfig
+    from gripdem.dem.scenes import generate
+    from gripdem.dem.validation import validate_trajectories
+
+    scene_cfg = {**_group("scene", scene), **(physics or {})}
+    preset_cfg = _group("preset", preset)
+    for key, value in (
+        ("particles", particles),
+        ("frames", frames),
+        ("frame_interval", frame_interval),
+    ):
+        if value is not None:
+            preset_cfg[key] = value
+    config = GeneratorConfig.from_mappings(
+        scene_cfg, preset_cfg, sims=sims, seed=seed, backend=backend
+    )
+    data, _ = generate(config, progress=progress, workers=workers)
+    if validate:
+        report = validate_trajectories(data)
+        failed = [k for k, ok in report.get("checks", {}).items() if not ok]
+        if failed:
+            raise RuntimeError(f"the generated data failed the validation checks {failed}")
+    return Trajectory.from_data(data)
+
+
+def physics_report(
+    trajectory: Trajectory,
+    sim: int = 0,
+    *,
+    lags: list[int] | None = None,
+    structure_frames: int = 10,
+):
+    """The physics of simulation ``sim`` of ``trajectory``: g(r), contact coordination,
+    overlaps, the mean-flow profile, the MSD and non-affine MSD against the lag and (from 1000
+    frames) the self-diffusion coefficients; a
+    :class:`gripdem.evaluation.trajectory_physics.TrajectoryPhysics` (``.table()`` prints
+    it)."""
+    from gripdem.evaluation.trajectory_physics import trajectory_physics
+
+    if not 0 <= sim < trajectory.n_sims:
+        raise ValueError(f"sim {sim}: the trajectory holds simulations 0..{trajectory.n_sims - 1}")
+    return trajectory_physics(
+        trajectory.positions[sim],
+        trajectory.times[sim],
+        trajectory.scene.to_boundary(),
+        trajectory.scene.diameter,
+        lags=lags,
+        structure_frames=structure_frames,
+    )

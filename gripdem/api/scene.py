@@ -1,0 +1,288 @@
+"""Scenes and trajectories held in memory: the data types of the Python API.
+
+Nothing here imports torch; :mod:`gripdem.boundary` (which does) is imported when a method
+needs the boundary math.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from gripdem.boundary import Boundary
+    from gripdem.data.schema import DatasetMeta, TrajectoryData
+
+BOUNDARIES = ("periodic", "lees_edwards")
+#: where a scene's numbers may differ and still describe the same scene (relative)
+SAME_SCENE_RTOL = 1e-9
+
+
+def _positive(name: str, value: Any) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"Scene.{name}: expected a positive number, got {value!r}") from None
+    if not (math.isfinite(number) and number > 0):
+        raise ValueError(f"Scene.{name}: expected a positive finite number, got {value!r}")
+    return number
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A periodic unit cell and its particles, described in memory (SI units).
+
+    Args:
+        box: ``(lx, ly, lz)`` in metres; the box is centred at the origin and positions lie in
+            ``[-l/2, l/2)``.
+        diameter: particle diameter, m.
+        frame_interval: seconds between two frames.
+        boundary: ``"periodic"`` or ``"lees_edwards"`` (gradient x, flow z).
+        shear_rate: Lees-Edwards shear rate, 1/s (0 for a periodic box).
+        le_sign: +1 when the +x image is shifted by +delta (``u_z = +shear_rate * x``), -1 for
+            the reverse convention.
+        le_time_origin: the time (s) at which the Lees-Edwards offset delta is 0.
+        body_force_amplitude: ``a`` in ``a_z(x) = a cos(2 pi x / lx)``, m/s² (0: none).
+
+    Example:
+        ``Scene(box=(3.2e-5,) * 3, diameter=2.5e-6, frame_interval=5e-6,
+        boundary="lees_edwards", shear_rate=1000.0)``
+    """
+
+    box: tuple[float, float, float]
+    diameter: float
+    frame_interval: float
+    boundary: str = "periodic"
+    shear_rate: float = 0.0
+    le_sign: int = 1
+    le_time_origin: float = 0.0
+    body_force_amplitude: float = 0.0
+
+    def __post_init__(self) -> None:
+        box = np.asarray(self.box, dtype=np.float64).reshape(-1)
+        if box.shape != (3,) or not (np.isfinite(box).all() and (box > 0).all()):
+            raise ValueError(
+                f"Scene.box: expected 3 positive lengths (lx, ly, lz), got {self.box!r}"
+            )
+        object.__setattr__(self, "box", tuple(float(v) for v in box))
+        object.__setattr__(self, "diameter", _positive("diameter", self.diameter))
+        object.__setattr__(self, "frame_interval", _positive("frame_interval", self.frame_interval))
+        if self.boundary not in BOUNDARIES:
+            raise ValueError(f"Scene.boundary: expected one of {BOUNDARIES}, got {self.boundary!r}")
+        rate = float(self.shear_rate)
+        if self.boundary == "lees_edwards" and not (math.isfinite(rate) and rate > 0):
+            raise ValueError(
+                f"Scene.shear_rate: a lees_edwards scene needs a positive shear rate (1/s), got "
+                f"{self.shear_rate!r} (the flow direction is le_sign)"
+            )
+        if self.boundary == "periodic" and rate != 0:
+            raise ValueError(
+                f"Scene.shear_rate: a periodic scene has no shear rate, got {self.shear_rate!r} "
+                "(boundary='lees_edwards' for a sheared cell)"
+            )
+        object.__setattr__(self, "shear_rate", rate)
+        if self.le_sign not in (1, -1):
+            raise ValueError(f"Scene.le_sign: expected +1 or -1, got {self.le_sign!r}")
+        object.__setattr__(self, "le_sign", int(self.le_sign))
+        for name in ("le_time_origin", "body_force_amplitude"):
+            value = float(getattr(self, name))
+            if not math.isfinite(value):
+                raise ValueError(f"Scene.{name}: expected a finite number, got {value!r}")
+            object.__setattr__(self, name, value)
+
+    # ---- conversions ----------------------------------------------------------------------
+    @classmethod
+    def from_boundary(
+        cls,
+        boundary: Boundary,
+        diameter: float,
+        frame_interval: float,
+        body_force_amplitude: float = 0.0,
+    ) -> Scene:
+        """The scene of a :class:`gripdem.boundary.Boundary` and the particles' numbers."""
+        attrs = boundary.to_attrs()
+        return cls(
+            box=tuple(float(v) for v in attrs["box"]),
+            diameter=diameter,
+            frame_interval=frame_interval,
+            boundary=attrs["boundary"],
+            shear_rate=float(attrs["shear_rate"]),
+            le_sign=int(attrs["le_sign"]),
+            le_time_origin=float(attrs["le_time_origin"]),
+            body_force_amplitude=body_force_amplitude,
+        )
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike) -> Scene:
+        """The scene of a gripdem HDF5 dataset (its attributes; the frame interval from its
+        times), checked as every reader checks it."""
+        from gripdem.data.dataset_io import read_meta
+
+        return cls.from_meta(read_meta(path))
+
+    @classmethod
+    def from_meta(cls, meta: DatasetMeta) -> Scene:
+        """The scene of a dataset's :class:`~gripdem.data.schema.DatasetMeta`."""
+        return cls.from_boundary(
+            meta.boundary, meta.diameter, meta.frame_interval, meta.body_force_amplitude
+        )
+
+    @classmethod
+    def from_model_scene(cls, scene: dict[str, Any]) -> Scene:
+        """The scene a model file records (its ``scene`` hyperparameter)."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in scene.items() if k in names})
+
+    def to_boundary(self) -> Boundary:
+        """The :class:`gripdem.boundary.Boundary` of this scene (box and Lees-Edwards)."""
+        from gripdem.boundary import Boundary, Box, LeesEdwards
+
+        box = Box(*self.box)
+        if self.boundary == "periodic":
+            return Boundary(box)
+        return Boundary(box, LeesEdwards(self.shear_rate, self.le_sign, self.le_time_origin))
+
+    def to_meta(self, sims: int, frames: int, particles: int, path: str = "<in memory>"):
+        """A :class:`~gripdem.data.schema.DatasetMeta` of arrays of these sizes in this scene."""
+        from gripdem.data.schema import DatasetMeta
+
+        return DatasetMeta(
+            path=Path(path),
+            n_sims=int(sims),
+            n_frames=int(frames),
+            n_particles=int(particles),
+            boundary=self.to_boundary(),
+            radius=0.5 * self.diameter,
+            frame_interval=self.frame_interval,
+            body_force_amplitude=self.body_force_amplitude,
+            provenance={},
+            has_velocities=False,
+        )
+
+    def matches(self, other: Scene, rtol: float = SAME_SCENE_RTOL) -> bool:
+        """Whether ``other`` describes the same scene (every number within ``rtol``)."""
+        for f in fields(self):
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, str):
+                if a != b:
+                    return False
+            elif not np.allclose(a, b, rtol=rtol, atol=0.0):
+                return False
+        return True
+
+    def offsets(self, times: np.ndarray) -> np.ndarray:
+        """The float64 Lees-Edwards offsets delta (m) at ``times`` (zeros if periodic)."""
+        return self.to_boundary().offset(np.asarray(times, dtype=np.float64))
+
+    def times(self, frames: int, start: float = 0.0) -> np.ndarray:
+        """``(frames,)`` equidistant frame times from ``start`` (s), float64."""
+        return float(start) + self.frame_interval * np.arange(int(frames), dtype=np.float64)
+
+    def with_(self, **changes: Any) -> Scene:
+        """A copy with some numbers changed (checked again)."""
+        return replace(self, **changes)
+
+
+@dataclass
+class Trajectory:
+    """Trajectories of one scene held in memory.
+
+    Attributes:
+        positions: ``(sims, frames, particles, 3)`` wrapped positions, m, float64.
+        times: ``(sims, frames)`` absolute frame times, s, float64.
+        scene: the :class:`Scene`.
+        velocities: optional ``(sims, frames, particles, 3)``, m/s.
+        provenance: what made the data (generator and its parameters, or importer).
+    """
+
+    positions: np.ndarray
+    times: np.ndarray
+    scene: Scene
+    velocities: np.ndarray | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.positions = np.asarray(self.positions, dtype=np.float64)
+        self.times = np.asarray(self.times, dtype=np.float64)
+        if self.positions.ndim == 3:  # one simulation
+            self.positions = self.positions[None]
+        if self.times.ndim == 1:
+            self.times = self.times[None]
+        if self.positions.ndim != 4 or self.positions.shape[-1] != 3:
+            raise ValueError(
+                f"Trajectory.positions: expected (sims, frames, particles, 3), got "
+                f"{self.positions.shape}"
+            )
+        if self.times.shape != self.positions.shape[:2]:
+            raise ValueError(
+                f"Trajectory.times: expected {self.positions.shape[:2]} (sims, frames), got "
+                f"{self.times.shape}"
+            )
+        if self.velocities is not None:
+            self.velocities = np.asarray(self.velocities, dtype=np.float64)
+
+    @property
+    def n_sims(self) -> int:
+        """Simulations held."""
+        return self.positions.shape[0]
+
+    @property
+    def n_frames(self) -> int:
+        """Frames per simulation."""
+        return self.positions.shape[1]
+
+    @property
+    def n_particles(self) -> int:
+        """Particles per frame."""
+        return self.positions.shape[2]
+
+    @classmethod
+    def from_data(cls, data: TrajectoryData, scene: Scene | None = None) -> Trajectory:
+        """From the in-memory form of the HDF5 format
+        (:class:`gripdem.data.schema.TrajectoryData`); ``scene`` default: its own, with the
+        frame interval a file reader takes (the median step, checked equidistant)."""
+        if scene is None:
+            from gripdem.data.schema import validate_times
+
+            interval = validate_times(None, data.times)
+            scene = Scene.from_boundary(
+                data.boundary, data.diameter, interval, data.body_force_amplitude
+            )
+        return cls(data.positions, data.times, scene, data.velocities, dict(data.provenance))
+
+    def to_data(self) -> TrajectoryData:
+        """The in-memory form of the HDF5 format."""
+        from gripdem.data.schema import TrajectoryData
+
+        return TrajectoryData(
+            positions=self.positions,
+            times=self.times,
+            boundary=self.scene.to_boundary(),
+            radius=0.5 * self.scene.diameter,
+            body_force_amplitude=self.scene.body_force_amplitude,
+            provenance=dict(self.provenance),
+            velocities=self.velocities,
+        )
+
+
+def read_trajectory(path: str | os.PathLike) -> Trajectory:
+    """Read a gripdem HDF5 dataset into memory (checked: every bad field is a clear error).
+    Its scene is :meth:`Scene.from_file`'s, the one ``gripdem.predict`` applies a model in."""
+    from gripdem.data.dataset_io import read_dataset
+
+    return Trajectory.from_data(read_dataset(path), Scene.from_file(path))
+
+
+def write_trajectory(
+    path: str | os.PathLike, trajectory: Trajectory, overwrite: bool = False
+) -> Path:
+    """Write ``trajectory`` as a gripdem HDF5 dataset, validated first and written atomically
+    (an existing file is kept unless ``overwrite``); returns the path."""
+    from gripdem.data.dataset_io import write_dataset
+
+    return write_dataset(path, trajectory.to_data(), overwrite=overwrite)

@@ -1,0 +1,209 @@
+"""The Python API (``gripdem.*``): the same rollouts as ``gripdem.predict``, scenes in memory
+that match the files, the surrogate stepped from outside, the DEM and the physics report, and a
+light ``import gripdem``."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import gripdem
+import gripdem.api
+from gripdem.data.dataset_io import read_dataset
+from gripdem.inference.checkpoint import IncompatibleError
+from gripdem.predict import main as predict_main
+
+STABLE_NAMES = {
+    "Model",
+    "RolloutResult",
+    "Scene",
+    "Surrogate",
+    "Trajectory",
+    "load_model",
+    "physics_report",
+    "read_trajectory",
+    "simulate",
+    "write_trajectory",
+}
+
+
+def test_import_gripdem_imports_no_torch():
+    code = (
+        "import sys, gripdem\n"
+        "scene = gripdem.Scene(box=(1e-5, 1e-5, 1e-5), diameter=1e-6, frame_interval=1e-6)\n"
+        "assert gripdem.load_model and gripdem.simulate\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'lightning')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_stable_names_are_exported_and_documented():
+    assert set(gripdem.api.__all__) == STABLE_NAMES
+    assert set(gripdem.API_NAMES) == STABLE_NAMES
+    for name in STABLE_NAMES:
+        obj = getattr(gripdem, name)
+        assert obj is getattr(gripdem.api, name)
+        assert obj.__doc__ and len(obj.__doc__.strip()) > 40, name
+    classes = (gripdem.Model, gripdem.Surrogate, gripdem.RolloutResult, gripdem.Scene)
+    for cls in (*classes, gripdem.Trajectory):
+        for attr, value in vars(cls).items():
+            if not attr.startswith("_") and (callable(value) or isinstance(value, property)):
+                assert getattr(value, "__doc__", None), f"{cls.__name__}.{attr}"
+    with pytest.raises(AttributeError, match="no attribute 'nothing_here'"):
+        gripdem.nothing_here  # noqa: B018
+
+
+def test_a_renamed_name_warns_and_still_works(monkeypatch):
+    monkeypatch.setitem(gripdem.api.DEPRECATED, "load", ("load_model", "0.2"))
+    with pytest.warns(DeprecationWarning, match=r"gripdem.load is deprecated.*gripdem.load_model"):
+        assert gripdem.load is gripdem.load_model
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gripdem.load_model  # the new name is quiet
+
+
+def test_a_scene_in_memory_matches_the_file(tiny_lebc_path):
+    from_file = gripdem.Scene.from_file(tiny_lebc_path)
+    data = read_dataset(tiny_lebc_path)
+    by_hand = gripdem.Scene(
+        box=tuple(data.box.lengths),
+        diameter=2.5e-6,
+        frame_interval=5e-6,
+        boundary="lees_edwards",
+        shear_rate=1000.0,
+    )
+    assert by_hand.matches(from_file) and from_file.matches(by_hand)
+    assert by_hand.to_boundary() == data.boundary
+    np.testing.assert_array_equal(by_hand.offsets(data.times), data.offsets())
+    assert not by_hand.matches(by_hand.with_(shear_rate=1001.0))
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"box": (1.0, 2.0)}, "Scene.box: expected 3 positive lengths"),
+        ({"diameter": -1.0}, "Scene.diameter: expected a positive finite number"),
+        ({"frame_interval": float("nan")}, "Scene.frame_interval"),
+        ({"boundary": "walls"}, "Scene.boundary: expected one of"),
+        ({"boundary": "lees_edwards"}, "Scene.shear_rate: a lees_edwards scene needs"),
+        ({"shear_rate": 5.0}, "Scene.shear_rate: a periodic scene has no shear rate"),
+        ({"le_sign": 2}, r"Scene.le_sign: expected \+1 or -1"),
+    ],
+)
+def test_bad_scenes_name_the_field(changes, message):
+    base = {"box": (1e-5, 1e-5, 1e-5), "diameter": 1e-6, "frame_interval": 1e-6}
+    with pytest.raises(ValueError, match=message):
+        gripdem.Scene(**{**base, **changes})
+
+
+def _predict_trajectory(tmp_path, checkpoint, data, start, frames):
+    out = tmp_path / "pred.h5"
+    argv = [str(checkpoint), str(data), "--out", str(out), "--start", str(start)]
+    assert predict_main([*argv, "--frames", str(frames), "--sims", "0", "1"]) == 0
+    return read_dataset(tmp_path / "pred_trajectory.h5")
+
+
+@pytest.mark.parametrize("scene", ["lebc", "pbc"])
+def test_the_api_rollout_equals_predict(tmp_path, scene, request):
+    """Both scenes, chained beyond the horizon, with the contact correction: the same frames
+    to round-off (lebc: the shipped model on DEM data; pbc: a run's checkpoint)."""
+    if scene == "lebc":
+        checkpoint, data_path = "pretrained:lebc", request.getfixturevalue("tiny_lebc_path")
+    else:
+        checkpoint = request.getfixturevalue("pbc_checkpoint")
+        data_path = request.getfixturevalue("pbc_file")
+    model = gripdem.load_model(checkpoint)
+    start, frames = 3, 3 * model.horizon + 2
+    expected = _predict_trajectory(tmp_path, checkpoint, data_path, start, frames)
+    data = gripdem.read_trajectory(data_path)
+    k1 = model.history_len + 1
+    window = slice(start, start + k1)
+    run = model.rollout(
+        data.positions[:2, window], data.times[:2, window], frames=frames, scene=data.scene
+    )
+    assert run.positions.shape == expected.positions.shape
+    assert np.abs(run.positions - expected.positions).max() < 1e-12 * data.scene.box[0]
+    np.testing.assert_array_equal(run.times, expected.times)
+    assert run.n_predicted == frames and run.divergence["stopped"] is None
+    assert sum(run.correction["overlapping_before"]) >= 0 and run.timings["forward"] > 0
+    # one simulation without a leading axis, times defaulting to the scene's frame interval
+    single = model.rollout(data.positions[0, window], frames=2, scene=data.scene)
+    assert single.positions.shape == (k1 + 2,) + data.positions.shape[2:]
+
+
+def test_the_surrogate_steps_hands_back_and_times(tiny_lebc_path):
+    model = gripdem.load_model("pretrained:lebc", precision="fp32")
+    data = gripdem.read_trajectory(tiny_lebc_path)
+    k1 = model.history_len + 1
+    history, times = data.positions[0, :k1], data.times[0, :k1]
+    whole = model.rollout(history, times, frames=13, scene=data.scene, precision="fp32")
+    sim = model.surrogate(history, times, scene=data.scene)
+    pieces = [sim.advance(1), sim.advance(7), sim.advance(5)]
+    np.testing.assert_array_equal(np.concatenate(pieces), whole.predicted)
+    assert sim.frames_advanced == 13 and sim.time == pytest.approx(whole.times[-1], rel=1e-12)
+    assert set(sim.timings) >= {"neighbour_list", "features", "forward", "correction"}
+    assert len(sim.correction["overlapping_before"]) == 13
+    # hand the DEM's own frames back: the surrogate continues from them as a fresh start does
+    truth = data.positions[0, 20 : 20 + k1]
+    sim.set_state(truth, data.times[0, 20 : 20 + k1])
+    fresh = model.rollout(truth, data.times[0, 20 : 20 + k1], frames=4, scene=data.scene)
+    np.testing.assert_array_equal(sim.advance(4), fresh.predicted)
+    frames, state_times = sim.state
+    assert frames.shape == (k1,) + truth.shape[1:] and state_times[-1] == sim.time
+    with pytest.raises(ValueError, match=r"set_state: expected frames \(>= 11, particles, 3\)"):
+        sim.set_state(truth[:3])
+
+
+def test_bad_histories_and_scenes_are_refused_clearly(pbc_checkpoint, pbc_file):
+    model = gripdem.load_model(pbc_checkpoint)
+    data = gripdem.read_trajectory(pbc_file)
+    k1 = model.history_len + 1
+    with pytest.raises(ValueError, match=rf"history: expected \(frames >= {k1}"):
+        model.rollout(data.positions[0, :2], scene=data.scene)
+    bad = data.positions[0, :k1].copy()
+    bad[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="history: positions must be finite"):
+        model.rollout(bad, scene=data.scene)
+    with pytest.raises(ValueError, match="times: the last .* frames must be .* s apart"):
+        model.rollout(data.positions[0, :k1], 2.0 * data.times[0, :k1], scene=data.scene)
+    other = data.scene.with_(box=tuple(1.5 * np.asarray(data.scene.box)))  # another box
+    with pytest.raises(IncompatibleError, match=r"<scene in memory>: field 'box'"):
+        model.rollout(data.positions[0, :k1], scene=other)
+    with pytest.raises(ValueError, match="deterministic"):
+        model.rollout(data.positions[0, :k1], scene=data.scene, members=3)
+
+
+def test_simulate_is_the_generator_and_the_files_round_trip(tmp_path, tiny_pbc_path):
+    generated = gripdem.simulate("pbc", preset="tiny", sims=1, seed=0)
+    cached = gripdem.read_trajectory(tiny_pbc_path)  # sims 3, seed 0: its first simulation
+    np.testing.assert_array_equal(generated.positions[0], cached.positions[0])
+    assert generated.scene.matches(cached.scene)
+    path = gripdem.write_trajectory(tmp_path / "mine.h5", generated)
+    back = gripdem.read_trajectory(path)
+    np.testing.assert_array_equal(back.positions, generated.positions)
+    assert back.scene == generated.scene and back.provenance["generator"] == "gripdem.dem"
+    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+        gripdem.write_trajectory(path, generated)
+    with pytest.raises(ValueError, match="scene 'walls': no .*walls.yaml; expected one of"):
+        gripdem.simulate("walls")
+
+
+def test_the_physics_report_of_dem_data(tiny_lebc_path):
+    data = gripdem.read_trajectory(tiny_lebc_path)
+    report = gripdem.physics_report(data, sim=1)
+    assert 0.95 < report.peak_over_d < 1.05 and report.gr.max() > 3  # the contact peak
+    assert 2.5 < report.coordination < 6 and report.overlap_fraction == 0.0
+    assert report.profile_kind == "linear"
+    assert report.profile[0] == pytest.approx(1000.0, rel=0.1)  # the imposed shear rate
+    assert list(report.lags[:3]) == [1, 2, 5]
+    assert np.all(np.diff(report.non_affine_msd_over_d2) > 0)
+    assert np.all(report.non_affine_msd_over_d2 < report.msd_over_d2)  # the flow removed
+    assert report.diffusion is None and "1000 frames" in report.notes[0]
+    assert "| coordination (< 1.01 d) |" in report.table()
+    with pytest.raises(ValueError, match=r"sim 5: the trajectory holds simulations 0..2"):
+        gripdem.physics_report(data, sim=5)

@@ -2,13 +2,19 @@
 
     python experiments/release/ship_pretrained.py --run pbc=RUN_DIR lebc=RUN_DIR
         [--data pbc=DATA.h5 lebc=DATA.h5]
+    python experiments/release/ship_pretrained.py --split-cards pbc lebc
 
 For each ``NAME=RUN_DIR`` (a ``python -m gripdem.run`` output folder) the run's data-only model
 file ``checkpoints/best.safetensors`` is loaded (format and weights checked), its card completed
 with the training data (:func:`gripdem.inference.checkpoint.training_data_card`: file, sizes,
 scene, the generator and its configuration; read from ``--data`` when the run's card predates
-it, default the cached built-in dataset of the run's scene and seed) and written, atomically, to
+it) and its split plan (which simulations trained, validated and tested it: from the run's
+``metrics.json`` when the card predates it) and written, atomically, to
 ``gripdem/inference/pretrained/NAME.safetensors`` with ``NAME.md``: the same card for people.
+
+``--split-cards NAME ...`` adds the split plan to shipped cards that predate it, in place (the
+same tensors): the plan the run made, rebuilt from the card (the data's sizes, the run's split,
+protocol and history) and the data config's defaults (fractions, explicit simulation lists).
 """
 
 from __future__ import annotations
@@ -18,11 +24,15 @@ import json
 import math
 from pathlib import Path
 
+from hydra import compose, initialize_config_dir
+
 from gripdem.data.dataset_io import read_meta
 from gripdem.data.h5io import atomic_write_text
-from gripdem.inference.checkpoint import load_checkpoint_model, training_data_card
+from gripdem.data.protocols import plan_windows
+from gripdem.inference.checkpoint import SPLIT_KEYS, load_checkpoint_model, training_data_card
 from gripdem.inference.model_file import read_model_file, save_model_file
 from gripdem.inference.pretrained import FOLDER
+from gripdem.run import CONFIG_DIR
 
 BASELINE_ROWS = (
     ("model", "test/rmse"),
@@ -40,6 +50,37 @@ def pairs(values: list[str], what: str) -> dict[str, str]:
             raise SystemExit(f"error: {what} {value!r}: expected NAME=PATH")
         out[name] = rest
     return out
+
+
+def split_sims(split: dict | None) -> str:
+    """``: simulations [..] / [..] / [..] of the file`` of a card's split plan ('' without)."""
+    if not split:
+        return ""
+    parts = " / ".join(str(split.get(f"sims_{p}", [])) for p in ("train", "val", "test"))
+    return f": simulations {parts} of the file"
+
+
+def planned_split(card: dict) -> dict:
+    """The split plan of the run behind ``card`` (see the module doc), as the card keeps it."""
+    run, data = card["run"], card["training_data"]
+    overrides = [f"scene={card['scene']}", f"split={card['split']}"]
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=overrides).data
+    plan = plan_windows(
+        int(data["simulations"]),
+        int(data["frames"]),
+        card["split"],
+        protocol=run["protocol"],
+        history_len=run["history_len"],
+        train_stride=int(cfg.train_stride),
+        eval_stride=cfg.eval_stride,
+        fractions=dict(cfg.fractions),
+        sims=dict(cfg.sims),
+        simulations=cfg.simulations,
+        paper_windows=int(cfg.paper_windows),
+    )
+    summary = plan.summary()
+    return {key: summary[key] for key in SPLIT_KEYS if key in summary}
 
 
 def markdown_card(name: str, card: dict, size_bytes: int, n_weights: int) -> str:
@@ -71,7 +112,7 @@ def markdown_card(name: str, card: dict, size_bytes: int, n_weights: int) -> str
         "## Training",
         "",
         f"- split {card['split']} ({run.get('protocol')} protocol: train/validation/test by "
-        "simulation), history "
+        f"simulation{split_sims(data.get('split'))}), history "
         f"{run.get('history_len')} frames, horizon {run.get('horizon')}",
         f"- model `{run.get('model')}`: encoder {run.get('encoder')}, {run.get('channels')} "
         f"channels, graph cut-off {run.get('graph_cutoff_d')} d, decoder "
@@ -96,6 +137,23 @@ def markdown_card(name: str, card: dict, size_bytes: int, n_weights: int) -> str
     return "\n".join(lines) + "\n"
 
 
+def write_shipped(name: str, model, card: dict) -> Path:
+    """``NAME.safetensors`` (atomically) and ``NAME.md`` in the package's pretrained folder."""
+    target = FOLDER / f"{name}.safetensors"
+    FOLDER.mkdir(parents=True, exist_ok=True)
+    if isinstance(model, tuple):  # (hparams, state dict) of a shipped file: the same tensors
+        save_model_file(model[0], target, card, state_dict=model[1], overwrite=True)
+        state = model[1]
+    else:
+        save_model_file(model, target, card, overwrite=True)
+        state = model.state_dict()
+    n_weights = sum(p.numel() for p in state.values())
+    text = markdown_card(name, card, target.stat().st_size, n_weights)
+    atomic_write_text(FOLDER / f"{name}.md", text, overwrite=True)
+    print(f"wrote {target} ({target.stat().st_size / 1e6:.2f} MB) and {name}.md")
+    return target
+
+
 def ship(name: str, run_dir: Path, data: str | None) -> Path:
     source = Path(run_dir) / "checkpoints" / "best.safetensors"
     model = load_checkpoint_model(source)
@@ -105,23 +163,33 @@ def ship(name: str, run_dir: Path, data: str | None) -> Path:
         if data is None:
             raise SystemExit(f"error: {source}: its card has no training data; give --data")
         card["training_data"] = training_data_card(read_meta(data))
+    if "split" not in card["training_data"]:  # a card that predates it: the run's record
+        summary = json.loads((Path(run_dir) / "metrics.json").read_text())["data"]
+        card["training_data"]["split"] = {k: summary[k] for k in SPLIT_KEYS if k in summary}
     card["shipped_as"] = f"pretrained:{name}"
-    target = FOLDER / f"{name}.safetensors"
-    FOLDER.mkdir(parents=True, exist_ok=True)
-    save_model_file(model, target, card, overwrite=True)
-    n_weights = sum(p.numel() for p in model.state_dict().values())
-    text = markdown_card(name, card, target.stat().st_size, n_weights)
-    atomic_write_text(FOLDER / f"{name}.md", text, overwrite=True)
-    print(f"wrote {target} ({target.stat().st_size / 1e6:.2f} MB) and {name}.md")
+    target = write_shipped(name, model, card)
     print(json.dumps({k: card["metrics"][k] for k in card["metrics"] if "ratio" in k}, indent=1))
     return target
 
 
+def split_card(name: str) -> Path:
+    """Add the planned split to the card of the shipped ``pretrained:NAME`` (same tensors)."""
+    hparams, state, card = read_model_file(FOLDER / f"{name}.safetensors")
+    card["training_data"]["split"] = planned_split(card)
+    print(f"pretrained:{name}: {card['training_data']['split']}")
+    return write_shipped(name, (hparams, state), card)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--run", nargs="+", required=True, metavar="NAME=RUN_DIR")
+    parser.add_argument("--run", nargs="+", default=[], metavar="NAME=RUN_DIR")
     parser.add_argument("--data", nargs="+", default=[], metavar="NAME=DATA.h5")
+    parser.add_argument("--split-cards", nargs="+", default=[], metavar="NAME")
     args = parser.parse_args(argv)
+    if not args.run and not args.split_cards:
+        parser.error("give --run NAME=RUN_DIR ... or --split-cards NAME ...")
+    for name in args.split_cards:
+        split_card(name)
     data = pairs(args.data, "--data")
     for name, run_dir in pairs(args.run, "--run").items():
         ship(name, Path(run_dir), data.get(name))

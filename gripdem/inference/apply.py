@@ -25,7 +25,8 @@ from gripdem.evaluation.ensemble_scores import (
 )
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step
 from gripdem.evaluation.predictions import Predictions, write_predictions
-from gripdem.inference.checkpoint import check_compatible, load_model, training_overlap
+from gripdem.inference.checkpoint import check_compatible, load_model
+from gripdem.inference.in_sample import training_overlap
 from gripdem.inference.rollout import rollout
 from gripdem.inference.stepper import StepperSettings
 from gripdem.models.baselines import predict_baseline

@@ -1,4 +1,4 @@
-"""A trained run's checkpoint applied to new data: compatibility, loading, in-sample check.
+"""A trained run's checkpoint applied to new data: compatibility, loading, its model card.
 
 A checkpoint of :class:`~gripdem.models.module.TrajectoryModule` holds in its hyperparameters
 the scene it was trained on (box, boundary, shear rate, LE sign and time origin, diameter,
@@ -31,7 +31,6 @@ the weights loaded with ``strict=True``. Refusals are :class:`CheckpointError` n
 
 from __future__ import annotations
 
-import json
 import os
 import pickle
 import re
@@ -44,7 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
-import gripdem
+from gripdem._version import __version__
 from gripdem.data.encodings import ENCODINGS
 from gripdem.data.schema import DatasetMeta
 from gripdem.inference.model_file import (
@@ -63,6 +62,7 @@ __all__ = [
     "SCENE_TOLERANCE",
     "CheckpointError",
     "IncompatibleError",
+    "SPLIT_KEYS",
     "check_compatible",
     "export_run_model",
     "training_data_card",
@@ -70,7 +70,6 @@ __all__ = [
     "load_model",
     "read_checkpoint",
     "read_hparams",
-    "training_overlap",
 ]
 
 
@@ -169,11 +168,18 @@ def load_checkpoint_model(checkpoint: str | os.PathLike):
     return build_module(checkpoint, hparams, state)
 
 
-def training_data_card(meta: DatasetMeta) -> dict[str, Any]:
+#: what a model card keeps of the split plan (:meth:`gripdem.data.protocols.WindowPlan.summary`):
+#: which simulations (and, under ``time``, which frames) trained, validated and tested the model
+SPLIT_KEYS = ("split", "protocol", "sims_train", "sims_val", "sims_test", "time_boundaries")
+
+
+def training_data_card(meta: DatasetMeta, split: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """What a model card says about the training data: the file's name, its sizes and scene,
-    and its provenance (the generator and the configuration that made it, or the importer and
-    its options)."""
-    return {
+    its provenance (the generator and the configuration that made it, or the importer and its
+    options) and, given the split plan's ``split`` (``WindowPlan.summary()`` or the data
+    module's summary), its :data:`SPLIT_KEYS` under ``split``: the in-sample check of a model
+    file away from its run (:mod:`gripdem.inference.in_sample`) reads them."""
+    card = {
         "file": Path(meta.path).name,
         "simulations": int(meta.n_sims),
         "frames": int(meta.n_frames),
@@ -181,6 +187,9 @@ def training_data_card(meta: DatasetMeta) -> dict[str, Any]:
         "scene": data_scene(meta),
         "provenance": dict(meta.provenance),
     }
+    if split is not None:
+        card["split"] = {key: split[key] for key in SPLIT_KEYS if key in split}
+    return card
 
 
 def export_run_model(
@@ -189,12 +198,14 @@ def export_run_model(
     run: Mapping[str, Any],
     metrics: Mapping[str, Any],
     meta: DatasetMeta | None = None,
+    split: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write ``model`` as a shareable model file with its card: the run's flat
     hyperparameters ``run`` (scene, split, model, ...), the test metrics, gripdem's version and
-    (given the training data's ``meta``) :func:`training_data_card`."""
+    (given the training data's ``meta``, and the split plan's summary ``split``)
+    :func:`training_data_card`."""
     card = {
-        "gripdem_version": gripdem.__version__,
+        "gripdem_version": __version__,
         "scene": run.get("scene"),
         "split": run.get("split"),
         "model": run.get("model"),
@@ -202,7 +213,7 @@ def export_run_model(
         "metrics": finite_metrics(metrics),
     }
     if meta is not None:
-        card["training_data"] = training_data_card(meta)
+        card["training_data"] = training_data_card(meta, split)
     return save_model_file(model, path, card, overwrite=True)
 
 
@@ -319,63 +330,3 @@ def load_model(checkpoint, meta: DatasetMeta):
     """The model of ``checkpoint`` with the data's scene (after :func:`check_compatible`)."""
     hparams, state, _ = read_checkpoint(checkpoint)
     return build_module(checkpoint, hparams, state, scene=data_scene(meta))
-
-
-def _same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return Path(a).resolve() == Path(b).resolve()
-
-
-def training_overlap(
-    checkpoint, data_path, sims: list[int], first_target: int
-) -> tuple[bool, str, str]:
-    """Is the prediction in sample? ``(in_sample, protocol label, note)``.
-
-    Reads the run's ``metrics.json`` next to ``checkpoints/`` (the data file and the training
-    simulations or time boundaries). In sample: the same file and a training simulation
-    (protocol ``sims``/``paper``) or, under ``time``, a predicted frame before the end of the
-    training targets. Labelled ``paper`` (the in-sample protocol of ``predictions.h5``) then,
-    else ``sims`` or ``time``."""
-    metrics = Path(checkpoint).resolve().parent.parent / "metrics.json"
-    if not metrics.exists():
-        return (
-            False,
-            "sims",
-            (
-                f"in-sample check: {metrics} not found, so the training data is unknown; the "
-                "predictions are labelled out of sample"
-            ),
-        )
-    try:
-        summary = json.loads(metrics.read_text()).get("data", {})
-    except json.JSONDecodeError:
-        summary = {}
-    trained_on = summary.get("path")
-    if not trained_on or not _same_file(trained_on, data_path):
-        return False, "sims", f"out of sample: the model was trained on {trained_on}"
-    protocol = summary.get("protocol", "sims")
-    shared = sorted(set(sims) & set(summary.get("sims_train", [])))
-    if protocol == "time" and shared:
-        boundary = int(summary.get("time_boundaries", [0])[0])
-        if first_target < boundary:
-            return (
-                True,
-                "paper",
-                (
-                    f"IN SAMPLE: predicted frames from {first_target} on; the model trained on "
-                    f"targets before frame {boundary} of simulations {shared}"
-                ),
-            )
-        return False, "time", f"out of sample in time: training targets end before {boundary}"
-    if shared:
-        return True, "paper", f"IN SAMPLE: simulations {shared} were training simulations"
-    validation = sorted(set(sims) & set(summary.get("sims_val", [])))
-    if validation:
-        return (
-            False,
-            "sims",
-            (f"out of sample, but simulations {validation} chose the checkpoint (validation)"),
-        )
-    return False, "sims", f"out of sample: simulations {sims} were not trained on"

@@ -3,8 +3,9 @@
 The default model of each built-in scene, trained by ``python -m gripdem.run`` on that scene's
 default dataset, is stored in ``gripdem/inference/pretrained/NAME.safetensors``: a data-only model
 file (:mod:`gripdem.inference.model_file`) whose card records the training data and the
-configuration of the generator that made it, the split, the out-of-sample metrics and the gripdem
-version; ``NAME.md`` beside it is the same card for people. ``python -m gripdem.predict
+configuration of the generator that made it, the split (and which simulations trained, validated
+and tested the model: predict's in-sample check reads them), the out-of-sample metrics and the
+gripdem version; ``NAME.md`` beside it is the same card for people. ``python -m gripdem.predict
 pretrained:pbc DATA.h5`` applies one; ``model.init_from=pretrained:pbc`` fine-tunes from it.
 """
 

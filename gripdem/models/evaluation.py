@@ -26,6 +26,10 @@ from gripdem.evaluation.ensemble_scores import (
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step, rmse_split
 from gripdem.models.baselines import predict_baseline
 
+#: the stage's scores on the progress bar (``prog_bar``; gripdem.runner.progress shows them as
+#: RMSE in diameters and over constant velocity's); every metric is logged under its own name
+PROGRESS_BAR = ("rmse_over_d", "rmse_ratio_constant_velocity")
+
 
 class RolloutEvaluation:
     """Validation/test steps and epoch ends of the trajectory module (see the module doc)."""
@@ -203,9 +207,10 @@ class RolloutEvaluation:
         if not data:
             return {}
         metrics = data["metrics"]
+        shown = {f"{stage}/{name}" for name in PROGRESS_BAR}
         for key, value in metrics.items():
             if not math.isnan(value):
-                self.log(key, value, prog_bar=key == f"{stage}/rmse", sync_dist=True)
+                self.log(key, value, prog_bar=key in shown, sync_dist=True)
         return data
 
     def on_validation_epoch_end(self) -> None:

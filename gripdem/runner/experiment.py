@@ -51,6 +51,7 @@ from gripdem.runner.finetune import (
     validate_start,
 )
 from gripdem.runner.outputs import physics_metrics, plain, to_predictions, write_outputs
+from gripdem.runner.progress import StepBudgetBar
 from gripdem.runner.resume import ResumeCheckpoint, resumed_seconds
 
 log = logging.getLogger(__name__)
@@ -194,6 +195,8 @@ def build_trainer(cfg: DictConfig, out_dir: Path, logger: TensorBoardLogger) -> 
                 check_on_train_epoch_end=False,  # at validations, as the checkpoints
             )
         )
+    if cfg.trainer.get("enable_progress_bar", True):  # steps of the budget, RMSE in d and / CV
+        callbacks.append(StepBudgetBar())
     return L.Trainer(
         **plain(cfg.trainer),
         logger=logger,
@@ -329,7 +332,8 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         "hp/test_rmse_cv_baseline": metrics["test/rmse_constant_velocity"],
     }
     metrics.update(hp_values)
-    export_run_model(model, out_dir / "checkpoints" / "best.safetensors", hp, metrics, dm.meta)
+    model_file = out_dir / "checkpoints" / "best.safetensors"  # its card: data and split plan
+    export_run_model(model, model_file, hp, metrics, dm.meta, dm.summary())
     predictions = to_predictions(results, dm, hp)
     physics, physics_report = physics_metrics(predictions)
     metrics.update(physics)

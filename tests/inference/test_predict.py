@@ -15,7 +15,8 @@ from gripdem.boundary import Boundary, Box, LeesEdwards, brute_force_pairs
 from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
 from gripdem.evaluation.evaluate import evaluate_predictions
 from gripdem.evaluation.predictions import read_predictions
-from gripdem.inference.checkpoint import IncompatibleError, check_compatible, training_overlap
+from gripdem.inference.checkpoint import IncompatibleError, check_compatible
+from gripdem.inference.in_sample import training_overlap
 from gripdem.inference.precision import resolve_precision
 from gripdem.predict import main
 

@@ -9,11 +9,14 @@ import subprocess
 import sys
 
 import pytest
+from hydra import compose, initialize_config_dir
 
 from gripdem.data.dataset_io import read_meta
+from gripdem.data.protocols import plan_windows
 from gripdem.inference.checkpoint import load_checkpoint_model
 from gripdem.inference.model_file import read_model_file
 from gripdem.inference.pretrained import FOLDER, available, resolve
+from gripdem.run import CONFIG_DIR
 
 SHIPPED = {"pbc": "periodic", "lebc": "lees_edwards"}
 
@@ -75,3 +78,36 @@ def test_shipped_model_beats_the_baselines_on_a_new_simulation(tmp_path, name):
             ratios[baseline].append(per_step["model"][-1] / per_step[baseline][-1])
     for baseline, values in ratios.items():
         assert max(values) < 0.95, (baseline, values)  # measured: see the closing note
+
+
+def test_the_shipped_cards_name_the_simulations_their_training_used():
+    """The split plan on each shipped card is the one the default run made: the run's split,
+    protocol and history on the card's data sizes, with the data config's defaults (fractions,
+    no explicit simulation lists): simulations 0-3 trained, 4 validated, 5 tested."""
+    for name in SHIPPED:
+        _, _, card = read_model_file(FOLDER / f"{name}.safetensors", tensors=False)
+        run, data = card["run"], card["training_data"]
+        assert (data["provenance"]["parameters"]["seed"], run["seed"]) == (0, 0)
+        with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+            cfg = compose("config", overrides=[f"scene={name}", f"split={card['split']}"]).data
+        assert cfg.sims == {"train": None, "val": None, "test": None}
+        plan = plan_windows(
+            data["simulations"],
+            data["frames"],
+            card["split"],
+            protocol=run["protocol"],
+            history_len=run["history_len"],
+            fractions=dict(cfg.fractions),
+        ).summary()
+        parts = {f"sims_{p}": plan[f"sims_{p}"] for p in ("train", "val", "test")}
+        split = data["split"]
+        assert split == {"split": card["split"], "protocol": plan["protocol"], **parts}
+        assert (split["sims_train"], split["sims_val"], split["sims_test"]) == (
+            [0, 1, 2, 3],
+            [4],
+            [5],
+        )
+        assert (
+            "simulations [0, 1, 2, 3] / [4] / [5] of the file"
+            in (FOLDER / f"{name}.md").read_text()
+        )

@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+from gripdem.inference.model_file import read_model_file
 from gripdem.run import CONFIG_DIR
 from gripdem.runner.experiment import HP_METRICS, run_experiment
 
@@ -185,6 +186,9 @@ def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request,
         assert (out / "figures" / f"{name}.png").stat().st_size > 5000
     assert (out / "checkpoints" / "best.ckpt").exists()
     assert (out / "checkpoints" / "best.safetensors").exists()  # the shareable model file
+    card = read_model_file(out / "checkpoints" / "best.safetensors", tensors=False)[2]
+    split = card["training_data"]["split"]  # the in-sample check away from this folder reads it
+    assert split == {k: metrics["data"][k] for k in split} and split["sims_train"]
     assert (out / "trajectories" / "window000_pred.xyz").exists()
     with h5py.File(out / "predictions.h5") as h5:
         pred = h5["pred_positions"][()]

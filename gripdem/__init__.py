@@ -17,10 +17,10 @@ if TYPE_CHECKING:
         Scene,
         Surrogate,
         Trajectory,
+        generate,
         load_model,
-        physics_report,
+        physics,
         read_trajectory,
-        simulate,
         write_trajectory,
     )
 
@@ -32,9 +32,9 @@ API_NAMES = (
     "Surrogate",
     "Trajectory",
     "load_model",
-    "physics_report",
+    "physics",
     "read_trajectory",
-    "simulate",
+    "generate",
     "write_trajectory",
 )
 
@@ -46,9 +46,9 @@ __all__ = [
     "Surrogate",
     "Trajectory",
     "load_model",
-    "physics_report",
+    "physics",
     "read_trajectory",
-    "simulate",
+    "generate",
     "write_trajectory",
 ]
 

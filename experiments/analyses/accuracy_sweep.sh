@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The accuracy sweep of the README's results: default scenes, protocol sims, seeds 0-2, the four
-# paper splits, both scenes; the interaction model and the paper's models in the exact frame.
+# The accuracy sweep of the results (docs/explanation/results.md): default scenes, protocol sims,
+# seeds 0-2, the four paper splits, both scenes; the interaction model and the paper's models in
+# the exact frame.
 # Two jobs at a time, one thread each (2 cores). The paper's models train 2 epochs instead of
 # the preset's 5: their validation RMSE plateaus after the first epoch (measured at 190-10 lebc:
 # 0.966, 0.956, 0.953, 0.952, 0.952 of CV's over epochs 1-5), and five epochs of all three

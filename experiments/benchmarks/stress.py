@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> dict:
         "--rollout-scenes",
         nargs="+",
         default=["pbc", "lebc"],
-        help="scenes whose runs are rolled out (the README's 1000-frame lebc rollout of the "
+        help="scenes whose runs are rolled out (the docs' 1000-frame lebc rollout of the "
         "default model exists: --rollout-scenes pbc reuses it)",
     )
     ap.add_argument("--threads", type=int, default=1)

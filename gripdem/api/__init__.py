@@ -2,9 +2,9 @@
 
     import gripdem
     model = gripdem.load_model("pretrained:lebc")
-    data = gripdem.simulate("lebc", preset="tiny", sims=1)
+    data = gripdem.generate("lebc", preset="tiny", sims=1)
     run = model.rollout(data.positions[0], data.times[0], frames=100)
-    print(gripdem.physics_report(run.trajectory()).table())
+    print(gripdem.physics(run.trajectory()).table())
 
 Stability: every name in ``__all__`` keeps its meaning and signature within a major version.
 A name that changes is first kept as a deprecated alias for at least one minor release: it
@@ -19,8 +19,8 @@ import warnings
 from typing import Any
 
 from gripdem.api.coupling import Surrogate
+from gripdem.api.dem_physics import generate, physics
 from gripdem.api.model import Model, RolloutResult, load_model
-from gripdem.api.physics import physics_report, simulate
 from gripdem.api.scene import Scene, Trajectory, read_trajectory, write_trajectory
 
 __all__ = [
@@ -30,9 +30,9 @@ __all__ = [
     "Surrogate",
     "Trajectory",
     "load_model",
-    "physics_report",
+    "physics",
     "read_trajectory",
-    "simulate",
+    "generate",
     "write_trajectory",
 ]
 

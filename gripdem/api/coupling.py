@@ -1,10 +1,10 @@
 """A model stepped from your own code: advance, read the state, hand a state back.
 
 The surrogate holds the model's state in memory (the last ``K + 1`` frames, their times and a
-neighbour list with a skin): :meth:`Surrogate.advance` predicts frames on demand, one forward
+neighbour list with a skin): ``Surrogate.advance`` predicts frames on demand, one forward
 pass per ``link`` frames, so asking for frames one at a time costs nothing extra. A coupled code
 (a DEM engine that takes over, a fluid solver that moves the particles) reads
-:attr:`Surrogate.state`, changes it, and hands it back with :meth:`Surrogate.set_state`.
+``Surrogate.state``, changes it, and hands it back with ``Surrogate.set_state``.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from gripdem.api.scene import Scene, Trajectory
 
 
 class Surrogate:
-    """The model advanced in memory (from :meth:`gripdem.api.Model.surrogate`).
+    """The model advanced in memory (from ``gripdem.api.Model.surrogate``).
 
     Shapes follow the history it was started from: ``(frames, N, 3)`` for one simulation,
     ``(S, frames, N, 3)`` for ``S`` simulations stepped together.
@@ -112,5 +112,5 @@ class Surrogate:
         return self._stepper.precision
 
     def trajectory(self, frames: np.ndarray, times: np.ndarray) -> Trajectory:
-        """Frames you collected from :meth:`advance` as a :class:`Trajectory` of this scene."""
+        """Frames you collected from ``advance`` as a ``Trajectory`` of this scene."""
         return Trajectory(frames, times, self.scene, provenance={"generator": "gripdem.api"})

@@ -1,6 +1,6 @@
 """A trained model from Python: load it, roll it out, or step it inside your own code.
 
-torch and the model code are imported by :func:`load_model`, not before.
+torch and the model code are imported by ``load_model``, not before.
 """
 
 from __future__ import annotations
@@ -84,8 +84,8 @@ class RolloutResult:
         return sum(self.timings.values()) / max(self.n_predicted, 1)
 
     def trajectory(self) -> Trajectory:
-        """The rollout as a :class:`Trajectory` (rows: simulation-major, then members), to
-        write with :func:`gripdem.api.write_trajectory` or to report with ``.physics()``."""
+        """The rollout as a ``Trajectory`` (rows: simulation-major, then members), to
+        write with ``gripdem.api.write_trajectory`` or to report with ``.physics()``."""
         n, t = self.positions.shape[-2], self.positions.shape[-3]
         return Trajectory(
             self.positions.reshape(-1, t, n, 3),
@@ -96,13 +96,14 @@ class RolloutResult:
 
 
 class Model:
-    """A trained gripdem model (from :func:`load_model`).
+    """A trained gripdem model (from ``load_model``).
 
     Attributes:
-        source: what it was loaded from; path: the file.
+        source: what it was loaded from.
+        path: the model file.
         history_len: ``K``: it reads ``K + 1`` observed frames.
         horizon: ``f``: frames predicted per forward pass (rollouts chain passes).
-        scene: the training scene (:class:`Scene`).
+        scene: the training scene (``Scene``).
         card: the model file's card (training data, split, metrics; empty for a ``.ckpt``).
         is_ensemble: whether it draws latent noise (then ``members > 1`` samples).
     """
@@ -126,7 +127,7 @@ class Model:
         )
 
     def module(self, scene: Scene | None = None):
-        """The LightningModule (:class:`gripdem.models.module.TrajectoryModule`) applied in
+        """The LightningModule (``gripdem.models.module.TrajectoryModule``) applied in
         ``scene`` (default: the training scene), on the model's device, in eval mode."""
         scene = self.scene if scene is None else scene
         if scene not in self._modules:
@@ -213,15 +214,15 @@ class Model:
             members: samples of an ensemble model per simulation (1 for a deterministic one).
             seed: of the ensemble's noise (the same seed, the same members).
             correction: push overlapping particles apart after every frame (the stable
-                setting of ``gripdem.predict``); contact_distance: the closest centre
-                distance allowed, d.
+                setting of ``gripdem.predict``).
+            contact_distance: the closest centre distance the correction allows, in d.
             link: predicted frames kept per forward pass (default the horizon).
-            precision: of the encoder (default the model's, :func:`load_model`).
+            precision: of the encoder (default the model's, ``load_model``).
             check_overlap: compute the per-frame overlap fraction (divergence check).
 
         Returns:
-            a :class:`RolloutResult`; identical to ``python -m gripdem.predict`` on the same
-            frames (both use :func:`gripdem.inference.rollout.rollout`).
+            a ``RolloutResult``; identical to ``python -m gripdem.predict`` on the same
+            frames (both use ``gripdem.inference.rollout.rollout``).
         """
         from gripdem.inference.rollout import OVERLAP_MARGIN, rollout
 
@@ -280,8 +281,8 @@ class Model:
         link: int | None = None,
         precision: str | None = None,
     ):
-        """A :class:`~gripdem.api.coupling.Surrogate` started from ``history`` (arguments as
-        :meth:`rollout`): advance it frame by frame from your own code, read its state, hand
+        """A ``Surrogate`` started from ``history`` (arguments as
+        ``rollout``): advance it frame by frame from your own code, read its state, hand
         a state back, read its timings."""
         from gripdem.api.coupling import Surrogate
 

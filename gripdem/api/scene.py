@@ -1,6 +1,6 @@
 """Scenes and trajectories held in memory: the data types of the Python API.
 
-Nothing here imports torch; :mod:`gripdem.boundary` (which does) is imported when a method
+Nothing here imports torch; ``gripdem.boundary`` (which does) is imported when a method
 needs the boundary math.
 """
 
@@ -104,7 +104,7 @@ class Scene:
         frame_interval: float,
         body_force_amplitude: float = 0.0,
     ) -> Scene:
-        """The scene of a :class:`gripdem.boundary.Boundary` and the particles' numbers."""
+        """The scene of a ``gripdem.boundary.Boundary`` and the particles' numbers."""
         attrs = boundary.to_attrs()
         return cls(
             box=tuple(float(v) for v in attrs["box"]),
@@ -127,7 +127,7 @@ class Scene:
 
     @classmethod
     def from_meta(cls, meta: DatasetMeta) -> Scene:
-        """The scene of a dataset's :class:`~gripdem.data.schema.DatasetMeta`."""
+        """The scene of a dataset's ``DatasetMeta``."""
         return cls.from_boundary(
             meta.boundary, meta.diameter, meta.frame_interval, meta.body_force_amplitude
         )
@@ -139,7 +139,7 @@ class Scene:
         return cls(**{k: v for k, v in scene.items() if k in names})
 
     def to_boundary(self) -> Boundary:
-        """The :class:`gripdem.boundary.Boundary` of this scene (box and Lees-Edwards)."""
+        """The ``gripdem.boundary.Boundary`` of this scene (box and Lees-Edwards)."""
         from gripdem.boundary import Boundary, Box, LeesEdwards
 
         box = Box(*self.box)
@@ -148,7 +148,7 @@ class Scene:
         return Boundary(box, LeesEdwards(self.shear_rate, self.le_sign, self.le_time_origin))
 
     def to_meta(self, sims: int, frames: int, particles: int, path: str = "<in memory>"):
-        """A :class:`~gripdem.data.schema.DatasetMeta` of arrays of these sizes in this scene."""
+        """A ``DatasetMeta`` of arrays of these sizes in this scene."""
         from gripdem.data.schema import DatasetMeta
 
         return DatasetMeta(
@@ -195,7 +195,7 @@ class Trajectory:
     Attributes:
         positions: ``(sims, frames, particles, 3)`` wrapped positions, m, float64.
         times: ``(sims, frames)`` absolute frame times, s, float64.
-        scene: the :class:`Scene`.
+        scene: the ``Scene``.
         velocities: optional ``(sims, frames, particles, 3)``, m/s.
         provenance: what made the data (generator and its parameters, or importer).
     """
@@ -244,7 +244,7 @@ class Trajectory:
     @classmethod
     def from_data(cls, data: TrajectoryData, scene: Scene | None = None) -> Trajectory:
         """From the in-memory form of the HDF5 format
-        (:class:`gripdem.data.schema.TrajectoryData`); ``scene`` default: its own, with the
+        (``gripdem.data.schema.TrajectoryData``); ``scene`` default: its own, with the
         frame interval a file reader takes (the median step, checked equidistant)."""
         if scene is None:
             from gripdem.data.schema import validate_times
@@ -272,7 +272,7 @@ class Trajectory:
 
 def read_trajectory(path: str | os.PathLike) -> Trajectory:
     """Read a gripdem HDF5 dataset into memory (checked: every bad field is a clear error).
-    Its scene is :meth:`Scene.from_file`'s, the one ``gripdem.predict`` applies a model in."""
+    Its scene is ``Scene.from_file``'s, the one ``gripdem.predict`` applies a model in."""
     from gripdem.data.dataset_io import read_dataset
 
     return Trajectory.from_data(read_dataset(path), Scene.from_file(path))

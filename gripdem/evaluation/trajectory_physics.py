@@ -1,7 +1,7 @@
 """The physics of one trajectory on its own: structure, contacts, flow and motion.
 
 Any trajectory ``(T, N, 3)`` of a scene (a DEM simulation, a rollout, data from another engine)
-gets the quantities the rollout statistics compare (:mod:`gripdem.evaluation.rollout_stats`,
+gets the quantities the rollout statistics compare (``gripdem.evaluation.rollout_stats``,
 same definitions), for one set alone:
 
 - ``g(r)``: the LE-aware radial distribution over ``[0, 3 d)`` in bins of ``0.03 d``, averaged
@@ -39,7 +39,7 @@ from gripdem.evaluation.rollout_stats import (
 )
 
 #: g(r) range and bin width, in diameters (bins with edges at 0.99 and 1.02 d, see
-#: :data:`gripdem.evaluation.physics_report.GR_MAX_D`)
+#: ``gripdem.evaluation.physics_report.GR_MAX_D``)
 GR_MAX_D, GR_BIN_D = 2.97, 0.03
 #: x bins of the velocity profile
 PROFILE_BINS = 16
@@ -122,7 +122,7 @@ def trajectory_physics(
 ) -> TrajectoryPhysics:
     """The physics of ``positions`` ``(T, N, 3)`` (wrapped) at ``times`` ``(T,)`` in the cell
     ``boundary`` for particles of ``diameter`` (see the module doc). ``lags``: of the MSD, in
-    frames (default :func:`default_lags`); ``structure_frames``: frames, spread evenly, over
+    frames (default ``default_lags``); ``structure_frames``: frames, spread evenly, over
     which g(r), coordination and overlaps are averaged."""
     positions = np.asarray(positions, dtype=np.float64)
     times = np.asarray(times, dtype=np.float64)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,9 +25,9 @@ STABLE_NAMES = {
     "Surrogate",
     "Trajectory",
     "load_model",
-    "physics_report",
+    "physics",
     "read_trajectory",
-    "simulate",
+    "generate",
     "write_trajectory",
 }
 
@@ -35,7 +36,7 @@ def test_import_gripdem_imports_no_torch():
     code = (
         "import sys, gripdem\n"
         "scene = gripdem.Scene(box=(1e-5, 1e-5, 1e-5), diameter=1e-6, frame_interval=1e-6)\n"
-        "assert gripdem.load_model and gripdem.simulate\n"
+        "assert gripdem.load_model and gripdem.generate\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'lightning')))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -56,6 +57,14 @@ def test_the_stable_names_are_exported_and_documented():
                 assert getattr(value, "__doc__", None), f"{cls.__name__}.{attr}"
     with pytest.raises(AttributeError, match="no attribute 'nothing_here'"):
         gripdem.nothing_here  # noqa: B018
+
+
+def test_no_name_is_shadowed_by_a_module_of_the_package():
+    """``gripdem.<name>`` must stay the API's object after any ``import gripdem.<module>``
+    (an entry point such as ``gripdem.simulate`` would replace the attribute)."""
+    package = Path(gripdem.__file__).parent
+    modules = {p.stem for p in package.glob("*.py")} | {p.name for p in package.iterdir()}
+    assert STABLE_NAMES.isdisjoint(modules)
 
 
 def test_a_renamed_name_warns_and_still_works(monkeypatch):
@@ -178,8 +187,8 @@ def test_bad_histories_and_scenes_are_refused_clearly(pbc_checkpoint, pbc_file):
         model.rollout(data.positions[0, :k1], scene=data.scene, members=3)
 
 
-def test_simulate_is_the_generator_and_the_files_round_trip(tmp_path, tiny_pbc_path):
-    generated = gripdem.simulate("pbc", preset="tiny", sims=1, seed=0)
+def test_generate_is_the_generator_and_the_files_round_trip(tmp_path, tiny_pbc_path):
+    generated = gripdem.generate("pbc", preset="tiny", sims=1, seed=0)
     cached = gripdem.read_trajectory(tiny_pbc_path)  # sims 3, seed 0: its first simulation
     np.testing.assert_array_equal(generated.positions[0], cached.positions[0])
     assert generated.scene.matches(cached.scene)
@@ -190,12 +199,12 @@ def test_simulate_is_the_generator_and_the_files_round_trip(tmp_path, tiny_pbc_p
     with pytest.raises(FileExistsError, match="refusing to overwrite"):
         gripdem.write_trajectory(path, generated)
     with pytest.raises(ValueError, match="scene 'walls': no .*walls.yaml; expected one of"):
-        gripdem.simulate("walls")
+        gripdem.generate("walls")
 
 
 def test_the_physics_report_of_dem_data(tiny_lebc_path):
     data = gripdem.read_trajectory(tiny_lebc_path)
-    report = gripdem.physics_report(data, sim=1)
+    report = gripdem.physics(data, sim=1)
     assert 0.95 < report.peak_over_d < 1.05 and report.gr.max() > 3  # the contact peak
     assert 2.5 < report.coordination < 6 and report.overlap_fraction == 0.0
     assert report.profile_kind == "linear"
@@ -206,4 +215,4 @@ def test_the_physics_report_of_dem_data(tiny_lebc_path):
     assert report.diffusion is None and "1000 frames" in report.notes[0]
     assert "| coordination (< 1.01 d) |" in report.table()
     with pytest.raises(ValueError, match=r"sim 5: the trajectory holds simulations 0..2"):
-        gripdem.physics_report(data, sim=5)
+        gripdem.physics(data, sim=5)

@@ -26,7 +26,7 @@ def _group(group: str, name: str) -> dict[str, Any]:
     return dict(OmegaConf.to_container(OmegaConf.load(path), resolve=True))
 
 
-def simulate(
+def generate(
     scene: str = "pbc",
     preset: str = "tiny",
     *,
@@ -48,18 +48,22 @@ def simulate(
             shear): the physics of ``conf/scene/<scene>.yaml``.
         preset: the sizes of ``conf/preset/<preset>.yaml`` (``tiny``: 400 particles x 61
             frames; ``default``: 2000 x 201).
-        sims: independent simulations (default: the preset's); seed: the base seed
-            (simulation ``s`` uses ``SeedSequence(seed).spawn(sims)[s]``, as
+        sims: independent simulations (default: the preset's).
+        seed: the base seed (simulation ``s`` uses ``SeedSequence(seed).spawn(sims)[s]``, as
             ``python -m gripdem.simulate``).
-        particles, frames, frame_interval: override the preset's.
+        particles: override the preset's particle count.
+        frames: override the preset's written frames per simulation.
+        frame_interval: override the preset's seconds between frames.
         physics: override scene options (e.g. ``{"friction": 0.5, "shear_rate": 500.0}``).
-        backend: ``"numba"`` (CPU) or ``"torch"``; workers: processes (default one per CPU).
+        backend: ``"numba"`` (CPU) or ``"torch"``.
+        workers: processes, one simulation each (default one per CPU).
+        progress: show the DEM's progress bar.
         validate: run the plausibility checks of ``gripdem.simulate``: raise when one fails
             (finite, overlaps, the imposed profile, measurable non-affine motion); warn when
             a Lees-Edwards run has no face crossing (fine for a rollout, thin for training).
 
     Returns:
-        a :class:`Trajectory` with velocities and the generator's provenance.
+        a ``Trajectory`` with velocities and the generator's provenance.
     """
     from gripdem.dem.config import GeneratorConfig
     from gripdem.dem.scenes import generate
@@ -97,7 +101,7 @@ def simulate(
     return Trajectory.from_data(data)
 
 
-def physics_report(
+def physics(
     trajectory: Trajectory,
     sim: int = 0,
     *,
@@ -107,7 +111,7 @@ def physics_report(
     """The physics of simulation ``sim`` of ``trajectory``: g(r), contact coordination,
     overlaps, the mean-flow profile, the MSD and non-affine MSD against the lag and (from 1000
     frames) the self-diffusion coefficients; a
-    :class:`gripdem.evaluation.trajectory_physics.TrajectoryPhysics` (``.table()`` prints
+    ``gripdem.evaluation.trajectory_physics.TrajectoryPhysics`` (``.table()`` prints
     it)."""
     from gripdem.evaluation.trajectory_physics import trajectory_physics
 

@@ -10,19 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 from gripdem._version import __version__
 
-if TYPE_CHECKING:
-    from gripdem.api import (
-        Model,
-        RolloutResult,
-        Scene,
-        Surrogate,
-        Trajectory,
-        generate,
-        load_model,
-        physics,
-        read_trajectory,
-        write_trajectory,
-    )
+if TYPE_CHECKING:  # the names below, for type checkers and IDEs
+    from gripdem.api import *  # noqa: F403
 
 #: the names of :mod:`gripdem.api` available as ``gripdem.<name>``
 API_NAMES = (
@@ -31,26 +20,14 @@ API_NAMES = (
     "Scene",
     "Surrogate",
     "Trajectory",
+    "generate",
     "load_model",
     "physics",
     "read_trajectory",
-    "generate",
     "write_trajectory",
 )
 
-__all__ = [
-    "__version__",
-    "Model",
-    "RolloutResult",
-    "Scene",
-    "Surrogate",
-    "Trajectory",
-    "load_model",
-    "physics",
-    "read_trajectory",
-    "generate",
-    "write_trajectory",
-]
+__all__ = ["__version__", *API_NAMES]
 
 
 def __getattr__(name: str) -> Any:

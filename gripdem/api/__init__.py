@@ -29,10 +29,10 @@ __all__ = [
     "Scene",
     "Surrogate",
     "Trajectory",
+    "generate",
     "load_model",
     "physics",
     "read_trajectory",
-    "generate",
     "write_trajectory",
 ]
 

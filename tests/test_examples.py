@@ -75,3 +75,21 @@ def test_sweep_tensorboard_example(tmp_path, gripdem_data_root, tiny_pbc_path):
     out = run_example("sweep_tensorboard", gripdem_data_root, "--out", str(tmp_path / "sweep"))
     assert re.search(r"job 0 \(grip\): test RMSE / CV's [\d.]+", out)
     assert re.search(r"job 1 \(interaction\): test RMSE / CV's [\d.]+", out)
+
+
+def test_the_readme_python_snippet_runs(tmp_path, gripdem_data_root):
+    """The README's "From Python" block, run as it is printed."""
+    readme = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+    assert len(blocks) == 1
+    code = "\n".join(line[2:] if line.startswith("  ") else line for line in blocks[0].splitlines())
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=600,
+        env={**os.environ, "GRIPDEM_DATA": str(gripdem_data_root), "OMP_NUM_THREADS": "1"},
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "| coordination (< 1.01 d) |" in proc.stdout

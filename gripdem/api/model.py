@@ -117,6 +117,7 @@ class Model:
         self.horizon = int(hparams["horizon"])
         self.scene = Scene.from_model_scene(hparams["scene"])
         self._modules: dict[Scene, Any] = {}
+        self._notes: dict[tuple[Scene, int], list[str]] = {}
         self.is_ensemble = bool(self.module(self.scene).is_ensemble)
 
     def __repr__(self) -> str:
@@ -143,8 +144,11 @@ class Model:
         naming the field when the model cannot be applied there."""
         from gripdem.inference.checkpoint import check_compatible
 
-        meta = scene.to_meta(1, self.history_len + 1, particles, path="<scene in memory>")
-        return check_compatible(self.path, meta)[1]
+        key = (scene, int(particles))
+        if key not in self._notes:  # the model file is read once per scene, not per call
+            meta = scene.to_meta(1, self.history_len + 1, particles, path="<scene in memory>")
+            self._notes[key] = check_compatible(self.path, meta)[1]
+        return list(self._notes[key])
 
     def _history(self, history, times, scene: Scene):
         """``(observed (S, K+1, N, 3), times (S, K+1), single)`` from the user's arrays."""

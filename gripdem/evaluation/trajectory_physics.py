@@ -26,7 +26,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gripdem.boundary import Boundary
-from gripdem.evaluation.physics import coordination_number, overlap_fraction, radial_distribution
+from gripdem.evaluation.physics import (
+    coordination_number,
+    overlap_fraction,
+    radial_distribution,
+    velocity_profile,
+)
 from gripdem.evaluation.rollout_stats import (
     CONTACT_FACTOR,
     DIFFUSION_LAGS,
@@ -140,12 +145,9 @@ def trajectory_physics(
     steps, x_mid = frame_steps(positions, offsets, boundary)
     fit = fit_profile(steps, x_mid, boundary)
     dt = float(np.mean(np.diff(times)))
-    edges = np.linspace(-0.5 * box.lx, 0.5 * box.lx, PROFILE_BINS + 1)
-    x_wrapped = (x_mid + 0.5 * box.lx) % box.lx - 0.5 * box.lx
-    counts = np.histogram(x_wrapped, bins=edges)[0]
-    sums = np.histogram(x_wrapped, bins=edges, weights=steps[..., 2] / dt)[0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        vz = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+    x_bins, vz, _ = velocity_profile(  # the trajectory as one window after its first frame
+        positions[None, 1:], positions[:1], box, offsets[None, 1:], dt, PROFILE_BINS
+    )
     non_affine = steps.copy()
     non_affine[..., 2] -= profile_basis(x_mid, boundary) @ fit
     lags = default_lags(n_steps) if lags is None else [int(v) for v in lags]
@@ -169,7 +171,7 @@ def trajectory_physics(
         gr=gr,
         coordination=coordination_number(at, box, CONTACT_FACTOR * d, offsets[picked]),
         overlap_fraction=overlap_fraction(at, box, d, offsets[picked]),
-        profile_x_over_d=0.5 * (edges[1:] + edges[:-1]) / d,
+        profile_x_over_d=x_bins / d,
         profile_vz=vz,
         profile=(float(fit[0] / dt), float(fit[1] / dt)),
         lags=np.asarray(lags),

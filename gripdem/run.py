@@ -38,9 +38,10 @@ def main(cfg: DictConfig) -> float:
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     _OUT_DIRS.append(out_dir)
-    with single_run_errors():
+    report = None
+    with single_run_errors(out_dir):
         report = run_experiment(cfg, out_dir)
-    if not report:  # a non-zero DDP rank
+    if not report:  # a non-zero DDP rank, or a failed job of a multirun (its error.txt)
         return math.nan
     metrics = {k: v for k, v in report.items() if isinstance(v, float)}
     if cfg.optimized_metric not in metrics:

@@ -92,6 +92,18 @@ class Job:
     name: str
     params: dict[str, Any]
     metrics: dict[str, Any] | None
+    #: the job's error line (``error.txt``, written by a job that failed in a multirun)
+    error: str | None = None
+
+    @property
+    def status(self) -> str:
+        if self.error is not None:
+            return f"failed: {self.error}"
+        return "ok" if self.metrics is not None else "no metrics.json"
+
+
+#: a job that failed in a multirun leaves its error line here (gripdem.run)
+ERROR_FILE = "error.txt"
 
 
 def flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
@@ -153,7 +165,9 @@ def collect(sweep_dir: str | os.PathLike) -> list[Job]:
                 metrics = flatten(json.loads(metrics_file.read_text()))
             except json.JSONDecodeError as exc:
                 raise ValueError(f"{metrics_file}: not valid JSON ({exc})") from None
-        jobs.append(Job(name, params, metrics))
+        error_file = folder / ERROR_FILE
+        error = error_file.read_text().strip() if error_file.exists() else None
+        jobs.append(Job(name, params, metrics, error))
     return sorted(jobs, key=lambda j: _job_number(j.name))
 
 
@@ -214,7 +228,7 @@ def table(
     header = ["job", *params, "status", *metrics]
     rows = []
     for job in jobs:
-        status = "ok" if job.metrics is not None else "no metrics.json"
+        status = job.status
         values = [(job.metrics or {}).get(k) for k in metrics]
         rows.append([job.name, *(job.params.get(k) for k in params), status, *values])
     return header, rows

@@ -41,6 +41,7 @@ from gripdem.boundary import (
     Boundary,
     lattice_continuous_steps,
     remove_affine_flow,
+    sincos_encode,
     step_start_x,
 )
 from gripdem.data.encodings import Encoding
@@ -129,6 +130,23 @@ def initial_state(mode: str, encoding: Encoding, last_positions: torch.Tensor, i
         lengths = torch.as_tensor(encoding.box.lengths, device=last_positions.device)
         return (last_positions / lengths).to(inputs.dtype)
     return encoding.position_features(last_positions).to(inputs.dtype)
+
+
+#: the direct decoder's input channels beside the context vector, per mode (exact frame)
+DIRECT_STATE_CHANNELS = {"grip": 3, "pct": 6, "vct": 6}
+
+
+def direct_state(mode: str, box, last_positions: torch.Tensor, inputs: torch.Tensor):
+    """What the direct decoder (:mod:`gripdem.nn.direct`) reads beside each particle's context
+    vector, in the exact frame ``(batch, particles, DIRECT_STATE_CHANNELS[mode])``: ``grip`` the
+    last observed velocity (normalised, as the GRU decoder's state), ``pct`` / ``vct`` the last
+    observed position as sin/cos per axis (the paper's position input, continuous across the
+    periodic faces, where a position over the box length would jump).
+
+    inputs: normalised input steps ``(batch, particles, K, 3)``."""
+    if mode == "grip":
+        return inputs[:, :, -1]
+    return sincos_encode(last_positions, box).to(inputs.dtype)
 
 
 def state_drift(

@@ -116,8 +116,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         ar_prior: exact frame: add the linear AR forecast's deviation from CV to the output
             through a learned gate ``(horizon, 3)`` that starts at zero (needs ``linear_ar``).
         decoder: ``gru`` (the seq2seq GRU block) | ``direct`` (every horizon step at once from
-            the context vector, :mod:`gripdem.nn.direct`; exact-frame grip with the interaction
-            encoder only).
+            each particle's context vector, :mod:`gripdem.nn.direct`; the exact frame, any mode:
+            the graph-conv encoder's context is its last time step).
         zero_mean: exact frame: remove the mean over particles of the deviation from CV at every
             step (the truth's mean displacement equals CV's: pair forces cancel and the drag's
             mean flow has a fixed average, SPEC §12), so a rollout cannot drift as a whole.
@@ -225,18 +225,15 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         if kind not in DECODERS:
             raise ValueError(f"model.decoder must be one of {DECODERS}, got {kind!r}")
         if kind == "direct":
-            if not (
-                self.exact
-                and self.hparams.decoder_mode == "grip"
-                and self.encoder.context == "vector"
-            ):
+            if not self.exact:
                 raise ValueError(
-                    "model.decoder=direct needs the exact frame, decoder_mode=grip and the "
-                    "interaction encoder (one context vector per particle)"
+                    "model.decoder=direct needs the exact frame (model.encoding=unwrapped), got "
+                    f"{self.encoding.name!r}; the paper's wrapped-space modes take "
+                    "model.decoder=gru"
                 )
             return DirectDecoder(
                 self.encoder.out_channels,
-                lay.state_channels,
+                modes.DIRECT_STATE_CHANNELS[self.hparams.decoder_mode],
                 lay.out_channels,
                 int(self.hparams.horizon),
                 hidden,
@@ -323,16 +320,19 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         :attr:`noise_generator` (zeros give the noise-free network)."""
         mode = self.hparams.decoder_mode
         features = self._encode(batch, noise)
-        state = modes.initial_state(mode, self.encoding, batch.last_positions, batch.inputs)
-        base = modes.residual_base(
-            mode, self.hparams.residual_base, self.encoding, batch.inputs, self.normalizer
-        )
-        drift = None
-        if self.exact and mode != "grip":
-            drift = modes.state_drift(mode, self.encoding, modes.last_step(batch, self.boundary))
         if self.hparams.decoder == "direct":
+            state = modes.direct_state(mode, self.boundary.box, batch.last_positions, batch.inputs)
             outputs = self.decoder(features, state)
         else:
+            state = modes.initial_state(mode, self.encoding, batch.last_positions, batch.inputs)
+            base = modes.residual_base(
+                mode, self.hparams.residual_base, self.encoding, batch.inputs, self.normalizer
+            )
+            drift = None
+            if self.exact and mode != "grip":
+                drift = modes.state_drift(
+                    mode, self.encoding, modes.last_step(batch, self.boundary)
+                )
             outputs = self.decoder(features, state, base, self.hparams.horizon, drift)
         deviation = modes.outputs_to_deltas(mode, self.exact, outputs, batch.inputs)
         if self.ar_gate is not None:

@@ -20,13 +20,16 @@ constant-velocity step (drift) plus the predicted deviation.
 The output head starts at zero, so an untrained decoder reproduces its base: the last
 velocity for ``grip`` (constant velocity along a chord in feature space), and for ``pct`` /
 ``vct`` a zero delta (stay) or the last observed delta (constant velocity) by config.
-All work is batched over particles: no Python loop per particle, one loop over the horizon.
+All work is batched over particles and heads: no Python loop per particle, one loop over the
+horizon with one set of matrix products per step for every head (:mod:`gripdem.nn.stacked_gru`).
 """
 
 from __future__ import annotations
 
 import torch
 from torch import nn
+
+from gripdem.nn.stacked_gru import decode_heads, stacked_gru_weights
 
 CONTEXTS = ("sequence", "vector")
 
@@ -71,6 +74,13 @@ class Seq2SeqGRU(nn.Module):
         nn.init.zeros_(self.head.weight)
         nn.init.zeros_(self.head.bias)
 
+    def initial_hidden(self, features: torch.Tensor) -> torch.Tensor:
+        """The decoder's initial hidden state ``(layers, nodes, hidden)`` from the features."""
+        if self.context == "sequence":
+            return self.encoder(features)[1]
+        init = torch.tanh(self.encoder(features[:, -1]))
+        return init.reshape(-1, self.layers, self.hidden).transpose(0, 1).contiguous()
+
     def forward(
         self,
         features: torch.Tensor,
@@ -81,11 +91,9 @@ class Seq2SeqGRU(nn.Module):
         shift: torch.Tensor,
         drift: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        if self.context == "sequence":
-            _, hidden = self.encoder(features)
-        else:
-            init = torch.tanh(self.encoder(features[:, -1]))
-            hidden = init.reshape(-1, self.layers, self.hidden).transpose(0, 1).contiguous()
+        """The reference loop: one ``nn.GRU`` call per step (:class:`TrajectoryDecoder` runs
+        every head at once with :func:`~gripdem.nn.stacked_gru.decode_heads`)."""
+        hidden = self.initial_hidden(features)
         if drift is not None:
             shift = shift + drift
         outputs = []
@@ -148,6 +156,39 @@ class TrajectoryDecoder(nn.Module):
         horizon: int,
         drift: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        b, n, t, c = features.shape
+        flat = features.reshape(b * n, t, c)
+        flat_state = state.reshape(b * n, -1).to(features.dtype)
+        flat_base = None if base is None else base.reshape(b * n, -1).to(features.dtype)
+        fold, shift = self.fold.to(features.dtype), self.shift.to(features.dtype)
+        if drift is not None:
+            shift = shift + drift.reshape(b * n, -1).to(features.dtype)
+        first = self.heads[0]
+        hidden = torch.stack([head.initial_hidden(flat) for head in self.heads], dim=1)
+        outputs = decode_heads(
+            hidden,
+            flat_state,
+            flat_base,
+            horizon,
+            stacked_gru_weights([head.decoder for head in self.heads], first.layers),
+            torch.stack([head.head.weight.t() for head in self.heads]),
+            torch.stack([head.head.bias[None] for head in self.heads]),
+            fold,
+            shift,
+            first.decoder.dropout if self.training else 0.0,
+        )
+        return outputs.mean(0).reshape(b, n, horizon, -1)
+
+    def reference_forward(
+        self,
+        features: torch.Tensor,
+        state: torch.Tensor,
+        base: torch.Tensor | None,
+        horizon: int,
+        drift: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """:meth:`forward` through each head's own cell-by-cell loop (the reference the
+        batched loop is tested and benchmarked against; same arguments and result)."""
         b, n, t, c = features.shape
         flat = features.reshape(b * n, t, c)
         flat_state = state.reshape(b * n, -1)

@@ -56,6 +56,11 @@ class PositionFeatures(Enum):
     false = "false"
 
 
+class DecoderKind(Enum):
+    direct = "direct"
+    gru = "gru"
+
+
 class LrSchedule(Enum):
     constant = "constant"
     cosine = "cosine"
@@ -127,7 +132,7 @@ class ModelSchema:
     ar_prior: bool = False
     horizon: Optional[int] = None
     init_from: Optional[str] = None
-    decoder: str = "gru"
+    decoder: DecoderKind = DecoderKind.gru
     zero_mean: bool = False
     history_noise: float = 0.0
     loss: str = "mse"
@@ -221,14 +226,20 @@ def check_combination(cfg: DictConfig) -> None:
             f"data.encoding={cfg.data.encoding.value} differs from model.encoding="
             f"{cfg.model.encoding.value}; leave data.encoding to follow the model"
         )
-    if mode == "vct" and boundary == "periodic":
+    exact = cfg.model.encoding == EncodingName.unwrapped
+    if mode == "vct" and boundary == "periodic" and not exact:
         log.warning(
-            "model=vct on a periodic scene: the LE shift channels are identically zero; "
+            "model=vct_paper on a periodic scene: the LE shift channels are identically zero; "
             "vct reduces to pct with a different loss"
+        )
+    if cfg.model.decoder == DecoderKind.direct and not exact:
+        raise ValueError(
+            "model.decoder=direct reads the exact frame: it needs model.encoding=unwrapped, got "
+            f"{cfg.model.encoding.value}; the paper's wrapped-space modes take model.decoder=gru "
+            "(allowed: model.decoder=direct|gru with unwrapped, gru with sincos or vct)"
         )
     if cfg.model.vct_shift == VctShift.exact and mode != "vct":
         raise ValueError("model.vct_shift=exact is only read by model.decoder_mode=vct")
-    exact = cfg.model.encoding == EncodingName.unwrapped
     if cfg.model.encoder.name == EncoderName.interaction and not exact:
         raise ValueError(
             "model.encoder.name=interaction needs the exact frame: model.encoding=unwrapped, "

@@ -33,7 +33,11 @@ import traceback
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
+#: set by the parallel launcher (gripdem.runner.parallel_launcher) for each job it starts: a
+#: job's user error also goes to its error.txt, which the sweep's summary reads
+SWEEP_JOB_ENV = "GRIPDEM_SWEEP_JOB"
 #: Lightning's loggers that carry console handlers of their own
 LIGHTNING_LOGGERS = ("lightning", "lightning.pytorch", "lightning.fabric")
 #: the loggers Lightning's ``rank_zero_info`` lines (the tips among them) are created on; a
@@ -292,19 +296,33 @@ def report_error(exc: BaseException) -> None:
 
 
 @contextmanager
-def single_run_errors() -> Iterator[None]:
+def single_run_errors(out_dir: Path | None = None) -> Iterator[None]:
     """Around the work of a Hydra job: in a single run a user error prints its line and exits
-    with status 1 right here, before Hydra adds a line of its own (``Error executing job with
-    overrides``, which a multirun keeps: it says which job failed)."""
+    with status 1 right here, before Hydra adds a line of its own. In a multirun the job's
+    error line goes to ``out_dir/error.txt`` (when given) and is printed, and the error is
+    swallowed, so the other jobs run and the sweep's summary names this job with its error
+    (the command still ends with status 1: :class:`gripdem.runner.sweep_callback.SweepSummary`);
+    without ``out_dir`` it is re-raised (Hydra's ``Error executing job with overrides``). A job
+    of the parallel launcher (a single run in its own process, :data:`SWEEP_JOB_ENV` set)
+    writes its error.txt too and exits with status 1."""
     try:
         yield
     except _user_error_types() as exc:
         from hydra.core.hydra_config import HydraConfig
         from hydra.types import RunMode
 
-        if HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN:
+        multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+        sweep_job = multirun or bool(os.environ.get(SWEEP_JOB_ENV))
+        if multirun and out_dir is None:
             raise
         report_error(exc)
+        if sweep_job and out_dir is not None:
+            from gripdem.data.h5io import atomic_write_text
+            from gripdem.evaluation.sweep_summary import ERROR_FILE
+
+            atomic_write_text(Path(out_dir) / ERROR_FILE, one_line(exc) + "\n", overwrite=True)
+            if multirun:
+                return
         raise SystemExit(1) from None
 
 

@@ -1,6 +1,8 @@
 """Hydra callback: after a multirun, one summary table across its jobs (Markdown and CSV).
 
-Registered in ``conf/config.yaml`` under ``hydra.callbacks``; the table itself is built by
+Registered in ``conf/config.yaml`` under ``hydra.callbacks``. A job that failed is a row with
+its error line, and the command ends with one line naming every failed job with its overrides
+(status 1) after the table is written. The table itself is built by
 :func:`gripdem.evaluation.sweep_summary.write_summary` (also ``python -m gripdem.summary
 SWEEP_DIR``).
 """
@@ -14,9 +16,13 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from gripdem.evaluation.sweep_summary import write_summary
+from gripdem.evaluation.sweep_summary import collect, write_summary
 
 log = logging.getLogger(__name__)
+
+
+class SweepJobsFailed(ValueError):
+    """Some jobs of a multirun failed (the others' results and the summary are complete)."""
 
 
 class SweepSummary(Callback):
@@ -29,3 +35,11 @@ class SweepSummary(Callback):
             return
         print(markdown)
         print(f"sweep summary: {md} and {csv_path}")
+        failed = [job for job in collect(sweep_dir) if job.error is not None]
+        if failed:
+            named = "; ".join(
+                f"job {job.name} ({' '.join(f'{k}={v}' for k, v in job.params.items())}): "
+                f"{job.error}"
+                for job in failed
+            )
+            raise SweepJobsFailed(f"{len(failed)} job(s) of the sweep failed: {named}")

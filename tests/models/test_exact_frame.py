@@ -210,15 +210,17 @@ def test_ar_prior_needs_the_exact_frame_and_the_filter(crossing_paths):
 
 
 @pytest.mark.parametrize("scene", ["lebc", "pbc"])
-def test_direct_decoder_and_zero_mean_start_at_cv(crossing_paths, scene):
-    """The direct multi-step head starts at zero (the model is CV, crossers included), alone and
-    with the AR prior and the zero-mean constraint."""
+@pytest.mark.parametrize(("mode", "encoder"), EXACT_MODES)
+def test_direct_decoder_and_zero_mean_start_at_cv(crossing_paths, scene, mode, encoder):
+    """The direct multi-step head starts at zero (the model is CV, crossers included) in every
+    decoder mode on both encoders, with the AR prior and the zero-mean constraint: the
+    default form of grip, pct and vct."""
     dm = _datamodule(crossing_paths[scene], "6-4", 4)
     ar = fit_on_training_frames(dm, 2)
     model = module(
         dm,
-        "grip",
-        "interaction",
+        mode,
+        encoder,
         decoder="direct",
         zero_mean=True,
         ar_prior=True,
@@ -231,6 +233,24 @@ def test_direct_decoder_and_zero_mean_start_at_cv(crossing_paths, scene):
             _max_difference(pred, _cv(batch, dm.meta.box), dm.meta.box, batch.target_offsets)
             < 1e-13
         )
+
+
+def test_direct_decoder_inputs_differ_by_mode(crossing_paths):
+    """What the direct decoder reads beside the context: grip the last velocity (3 channels),
+    pct and vct the last position as sin/cos per axis (6), continuous across the faces."""
+    dm = _datamodule(crossing_paths["lebc"], "6-4", 4)
+    batch = next(iter(dm.test_dataloader()))
+    sizes = {}
+    for mode in ("grip", "pct", "vct"):
+        model = module(dm, mode, "interaction", decoder="direct")
+        sizes[mode] = model.decoder.net[0].in_features - model.encoder.out_channels
+    assert sizes == {"grip": 3, "pct": 6, "vct": 6}
+    from gripdem.models.decoder_modes import direct_state
+
+    box = dm.meta.box
+    edge = torch.tensor([[[box.lx / 2 - 1e-12, 0.0, 0.0], [-box.lx / 2, 0.0, 0.0]]])
+    state = direct_state("pct", box, edge, batch.inputs[:1, :2])
+    assert torch.allclose(state[0, 0], state[0, 1], atol=1e-6)  # float32 features
 
 
 @pytest.mark.parametrize("decoder", ["gru", "direct"])
@@ -248,11 +268,10 @@ def test_zero_mean_removes_any_net_deviation(crossing_paths, decoder):
     assert deviation.mean(dim=1).abs().max() < 1e-6
 
 
-def test_direct_decoder_needs_exact_grip_with_the_interaction_encoder(crossing_paths):
+def test_direct_decoder_needs_the_exact_frame(crossing_paths):
     dm = _datamodule(crossing_paths["pbc"], "6-4", 4)
+    paper = _datamodule(crossing_paths["pbc"], "6-4", 4, encoding="sincos")
     with pytest.raises(ValueError, match="model.decoder=direct"):
-        module(dm, "pct", "interaction", decoder="direct")
-    with pytest.raises(ValueError, match="model.decoder=direct"):
-        module(dm, "grip", "graph_conv", decoder="direct")
+        module(paper, "pct", "graph_conv", encoding="sincos", decoder="direct")
     with pytest.raises(ValueError, match="model.decoder must be one of"):
         module(dm, "grip", "interaction", decoder="lstm")

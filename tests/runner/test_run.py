@@ -40,7 +40,6 @@ GROUPS = {
 #: config options that need an optional Hydra plugin (extras `sweep` and `cluster`)
 PLUGINS = {
     "hparams_search=optuna": "hydra_plugins.hydra_optuna_sweeper",
-    "hydra/launcher=local_parallel": "hydra_plugins.hydra_joblib_launcher",
     "hydra/launcher=slurm": "hydra_plugins.hydra_submitit_launcher",
 }
 
@@ -83,7 +82,9 @@ def test_custom_split_and_defaults():
     # a step budget: one simulation of the user's gets as many updates as the default six
     # (the model's own: the lean interaction encoder takes twice the steps of the paper models)
     assert (default.trainer.max_steps, default.trainer.max_epochs) == (3640, -1)
-    assert compose_run(["model=vct"]).trainer.max_steps == 1820
+    # grip, pct and vct share the default model's form and budget (only the mode differs)
+    assert compose_run(["model=vct"]).trainer.max_steps == 3640
+    assert compose_run(["model=vct_paper"]).trainer.max_steps == 1820
     assert compose_run(["trainer.max_steps=50"]).trainer.max_steps == 50
     # the data's graph cut-off follows the encoder (one source of truth)
     assert default.data.graph_cutoff == default.model.encoder.cutoff == 1.15
@@ -106,7 +107,7 @@ def test_the_ar_prior_refuses_the_paper_frame():
     with pytest.raises(ValueError, match="ar_prior"):
         check_combination(cfg)
     assert compose_run(["model=interaction"]).model.ar_prior
-    assert not compose_run(["model=grip"]).model.ar_prior
+    assert not compose_run(["model=grip_paper"]).model.ar_prior
 
 
 def test_the_ensemble_model_is_the_default_model_with_noise_and_its_own_score():

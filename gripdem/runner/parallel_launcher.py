@@ -1,0 +1,215 @@
+"""Jobs of a multirun side by side, each in its own process with its own threads.
+
+The default launcher of ``python -m gripdem.run -m ...`` (``hydra/launcher=parallel``; the
+Hydra plugin class is ``hydra_plugins.gripdem_launcher.ParallelLauncher``, which calls
+:func:`launch_jobs`). Measured on the 2-core machine with the mission's sweep
+(``experiments/results/mission_command.md``): two jobs with one torch thread each finish
+sooner than the same jobs one after another with two threads, because a small model at batch
+size one keeps a second thread mostly idle.
+
+Each job is ``python -m gripdem.run <its overrides> hydra.run.dir=<sweep>/<job number>`` with
+``OMP_NUM_THREADS=<threads>``: a single run in a fresh process, so its log, TensorBoard run,
+checkpoints and errors stay its own. What it prints goes to ``<job folder>/console.log``; the
+sweep's console gets one line when a job starts and one when it ends (its time and error
+line). At most ``n_jobs`` run at once, and ``n_jobs x threads`` never exceeds the CPUs given
+to this process (no oversubscription). A job that fails writes ``error.txt`` (the one error
+line), returns NaN to the sweeper, and leaves the other jobs running; the sweep's summary
+names it.
+
+Stopping: Ctrl-C reaches every job (one process group) and each answers with its one
+``interrupted:`` line in its console.log; SIGTERM to the sweep is forwarded to every job;
+if the sweep process is killed outright, the kernel sends each job SIGTERM
+(``PR_SET_PDEATHSIG``), so no job outlives it. Every file a job writes is written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from hydra.core.utils import JobReturn, JobStatus, filter_overrides
+from omegaconf import DictConfig, open_dict
+
+from gripdem.runner.console import SWEEP_JOB_ENV
+
+log = logging.getLogger(__name__)
+
+#: seconds between checks of the running jobs
+POLL_SECONDS = 0.2
+#: seconds a job gets to stop after SIGTERM before SIGKILL
+STOP_SECONDS = 20.0
+
+
+def available_cpus() -> int:
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def plan_parallel(n_jobs: int | None, threads: int | None, uses_gpu: bool) -> tuple[int, int]:
+    """``(jobs at once, torch threads per job)``. ``n_jobs=None``: as many one-thread jobs as
+    CPUs (one at a time on a GPU: jobs would share it); ``threads=None``: the CPUs shared
+    out. Refuses a pair that would oversubscribe the CPUs."""
+    cpus = available_cpus()
+    if n_jobs is None:
+        n_jobs = 1 if uses_gpu else max(1, cpus // (threads or 1))
+    if n_jobs < 1:
+        raise ValueError(f"hydra.launcher.n_jobs must be >= 1 or null (auto), got {n_jobs}")
+    if threads is None:
+        threads = max(1, cpus // n_jobs)
+    if n_jobs * threads > cpus and n_jobs > 1:
+        raise ValueError(
+            f"hydra.launcher.n_jobs={n_jobs} jobs x torch_threads={threads} exceeds the "
+            f"{cpus} CPUs of this process: lower one of them (threads of several jobs "
+            "spinning on too few cores are many times slower)"
+        )
+    return n_jobs, threads
+
+
+def _set_parent_death_signal() -> None:  # pragma: no cover - runs in the child before exec
+    from gripdem.dem.workers import _parent_death_signal
+
+    _parent_death_signal(signal.SIGTERM)
+
+
+def _job_dir(config: DictConfig) -> Path:
+    return Path(str(config.hydra.sweep.dir)) / str(config.hydra.sweep.subdir)
+
+
+def _return_value(job_dir: Path, metric: str) -> tuple[Any, str | None]:
+    """The job's ``metric`` from its metrics.json and its error line (error.txt), if any."""
+    error_file = job_dir / "error.txt"
+    if error_file.exists():
+        return math.nan, error_file.read_text().strip()
+    metrics_file = job_dir / "metrics.json"
+    if not metrics_file.exists():
+        return math.nan, "no metrics.json (see console.log)"
+    metrics = json.loads(metrics_file.read_text())
+    flat = {**metrics, **metrics.get("metrics", {})}
+    value = flat.get(metric)
+    if not isinstance(value, (int, float)):
+        return math.nan, f"optimized_metric={metric!r} is not in metrics.json"
+    return float(value), None
+
+
+class _Job:
+    def __init__(self, number: int, overrides: Sequence[str], config: DictConfig):
+        self.number, self.overrides, self.config = number, list(overrides), config
+        self.dir = _job_dir(config)
+        self.process: subprocess.Popen | None = None
+        self.started = 0.0
+
+    @property
+    def label(self) -> str:
+        return f"#{self.number} : {' '.join(filter_overrides(self.overrides))}"
+
+    def start(self, threads: int) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        command = [
+            *(sys.executable, "-m", "gripdem.run"),
+            *self.overrides,
+            f"hydra.run.dir={self.dir}",
+        ]
+        # torch's default thread count follows OMP_NUM_THREADS (torch_threads=N, when given
+        # among the job's overrides, sets it again); the job's overrides stay as the user's
+        threads_env = {name: str(threads) for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+        env = {**os.environ, **threads_env, SWEEP_JOB_ENV: "1"}
+        console = open(self.dir / "console.log", "w")  # noqa: SIM115 - closed by the child
+        with console:
+            self.process = subprocess.Popen(
+                command,
+                stdin=subprocess.DEVNULL,
+                stdout=console,
+                stderr=subprocess.STDOUT,
+                env=env,
+                preexec_fn=_set_parent_death_signal if sys.platform.startswith("linux") else None,
+            )
+        self.started = time.perf_counter()
+        print(f"job {self.label} started (log: {self.dir / 'console.log'})", flush=True)
+
+    def result(self, metric: str) -> JobReturn:
+        value, error = _return_value(self.dir, metric)
+        minutes = (time.perf_counter() - self.started) / 60
+        if error is None and self.process is not None and self.process.returncode != 0:
+            error = f"exited with status {self.process.returncode} (see console.log)"
+        end = f"failed: {error}" if error else "done"
+        print(f"job {self.label} {end} ({minutes:.1f} min)", flush=True)
+        ret = JobReturn(
+            overrides=self.overrides,
+            cfg=self.config,
+            hydra_cfg=None,
+            working_dir=str(self.dir),
+            task_name=str(self.config.hydra.job.name),
+            status=JobStatus.COMPLETED,
+        )
+        ret.return_value = value
+        return ret
+
+
+def _stop(jobs: list[_Job]) -> None:
+    """SIGTERM to every running job (each answers like Ctrl-C), SIGKILL after a grace."""
+    running = [j.process for j in jobs if j.process is not None and j.process.poll() is None]
+    for process in running:
+        process.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + STOP_SECONDS
+    for process in running:
+        try:
+            process.wait(max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def launch_jobs(
+    hydra_context: Any,
+    config: DictConfig,
+    job_overrides: Sequence[Sequence[str]],
+    initial_job_idx: int,
+    n_jobs: int | None,
+) -> list[JobReturn]:
+    """Run the jobs, at most ``n_jobs`` at once; returns their results in job order."""
+    trainer = config.get("trainer", {})
+    uses_gpu = str(trainer.get("accelerator", "cpu")) not in ("cpu", "auto") or bool(
+        trainer.get("strategy")
+    )
+    at_once, threads = plan_parallel(n_jobs, config.get("torch_threads"), uses_gpu)
+    Path(str(config.hydra.sweep.dir)).mkdir(parents=True, exist_ok=True)
+    jobs = []
+    for offset, overrides in enumerate(job_overrides):
+        number = initial_job_idx + offset
+        job_config = hydra_context.config_loader.load_sweep_config(config, list(overrides))
+        with open_dict(job_config):
+            job_config.hydra.job.id = number
+            job_config.hydra.job.num = number
+        jobs.append(_Job(number, overrides, job_config))
+    at_once = min(at_once, len(jobs))
+    print(
+        f"launching {len(jobs)} job(s), {at_once} at a time with {threads} torch thread(s) "
+        "each (hydra.launcher.n_jobs, torch_threads)",
+        flush=True,
+    )
+    metric = str(config.get("optimized_metric", "val/rmse_best"))
+    pending, running, results = list(jobs), [], {}
+    try:
+        while pending or running:
+            while pending and len(running) < at_once:
+                job = pending.pop(0)
+                job.start(threads)
+                running.append(job)
+            time.sleep(POLL_SECONDS)
+            for job in [j for j in running if j.process.poll() is not None]:
+                running.remove(job)
+                results[job.number] = job.result(metric)
+    except BaseException:  # Ctrl-C, SIGTERM (console turns it into KeyboardInterrupt), a bug
+        _stop(running)
+        raise
+    return [results[job.number] for job in jobs]

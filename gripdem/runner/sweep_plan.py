@@ -1,0 +1,158 @@
+"""Hydra callback: check every job's configuration and say what a run or sweep will cost, before
+anything runs or any folder is written.
+
+- A single run: :func:`~gripdem.runner.config_schema.check_combination` on its config in
+  ``on_run_start`` (Hydra creates the run folder after it), so an option that the model cannot
+  take ends in one line and leaves no folder behind.
+- A multirun with the basic sweeper: the sweep is expanded into its jobs as Hydra's
+  ``BasicSweeper`` expands it, each job's config is composed and checked (the first bad job is
+  named with its overrides), and one line gives the number of jobs and an estimate of their
+  time from measured step rates (:data:`SECONDS_PER_STEP`), before the first job starts. Other
+  sweepers (Optuna) choose their jobs as they go: only their trial count is printed.
+
+The estimate is for a 2-core CPU like the reference machine: it scales the measured seconds
+per optimiser step of each encoder/decoder kind by particles and history length, and adds each
+job's data, baseline and test time measured on the same machine
+(``experiments/results/mission_command.md``). A GPU or more cores run faster.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig, OmegaConf
+
+from gripdem.runner.config_schema import check_combination
+
+log = logging.getLogger(__name__)
+
+#: seconds per optimiser step at 2000 particles, history_len 10, batch size 1, 2 threads on the
+#: reference 2-core machine (experiments/results/mission_command.md): (encoder, decoder) ->
+#: (base, per predicted frame of the model's horizon)
+SECONDS_PER_STEP = {
+    ("interaction", "direct"): (0.046, 0.0),
+    ("graph_conv", "direct"): (0.33, 0.0),
+    ("interaction", "gru"): (0.046, 0.0066),
+    ("graph_conv", "gru"): (0.33, 0.0066),
+}
+#: seconds per job besides training at 2000 particles: loading, the AR fit, validation, the
+#: test and the outputs (per frame of the split's horizon: the chained test grows with it)
+SECONDS_PER_JOB = (14.0, 0.02)
+#: seconds of the built-in DEM per simulation of 2000 particles (the default preset, 2 cores)
+DEM_SECONDS_PER_SIM = 30.0
+#: wall time of two one-thread jobs side by side over one two-thread job's, on 2 cores
+#: (experiments/results/mission_command.md)
+PARALLEL_SLOWDOWN = 1.3
+
+
+def job_seconds(cfg: DictConfig) -> float:
+    """A rough estimate of one job's wall time on the reference machine (see module doc)."""
+    model = cfg.model
+    encoder = str(getattr(model.encoder.name, "value", model.encoder.name))
+    base, per_frame = SECONDS_PER_STEP.get((encoder, str(model.decoder)), (0.05, 0.01))
+    horizon = int(cfg.split.horizon)
+    model_horizon = min(int(model.horizon or horizon), horizon)
+    history = cfg.data.history_len or cfg.split.history
+    scale = float(cfg.preset.get("particles", 2000)) / 2000.0
+    per_step = (base + per_frame * model_horizon) * scale * max(1.0, history / 10.0)
+    steps = cfg.trainer.get("max_steps", -1)
+    if steps is None or int(steps) < 0:  # an epoch budget: the preset's windows per epoch
+        steps = 400 * int(cfg.trainer.get("max_epochs", 1) or 1)
+    fixed, per_test_frame = SECONDS_PER_JOB
+    return int(steps) * per_step + (fixed + per_test_frame * horizon) * scale
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:.0f} min" if seconds >= 600 else f"{seconds / 60:.1f} min"
+
+
+def expand_jobs(config: DictConfig) -> list[list[str]] | None:
+    """The override lists of a basic sweeper's jobs, in its order (None: another sweeper)."""
+    target = str(config.hydra.sweeper.get("_target_", ""))
+    if not target.endswith("BasicSweeper"):
+        return None
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+
+    params = config.hydra.sweeper.get("params") or {}
+    arguments = [f"{k}={v}" for k, v in params.items()]
+    arguments += list(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))
+    loader = GlobalHydra.instance().config_loader()
+    overrides = OverridesParser.create(config_loader=loader).parse_overrides(arguments)
+    return BasicSweeper.split_arguments(overrides, None)[0]
+
+
+class SweepPlan(Callback):
+    """Checks and cost estimate before a run or a sweep starts (see the module doc)."""
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        check_combination(config)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        jobs = expand_jobs(config)
+        if jobs is None:
+            trials = config.hydra.sweeper.get("n_trials")
+            print(f"sweep: {trials} trials chosen by the sweeper as it goes", flush=True)
+            return
+        loader = GlobalHydra.instance().config_loader()
+        total, missing = 0.0, {}
+        for overrides in jobs:
+            job = loader.load_sweep_config(config, list(overrides))
+            try:
+                check_combination(job)
+            except ValueError as exc:
+                raise ValueError(f"job {' '.join(overrides) or '(no overrides)'}: {exc}") from exc
+            total += job_seconds(job)
+            if job.data.path is None:
+                missing.update(_missing_dataset(job))
+        n = len(jobs)
+        at_once = _jobs_at_once(config, n)
+        wall = total / at_once * (PARALLEL_SLOWDOWN if at_once > 1 else 1.0)
+        how = "one after another" if at_once == 1 else f"{at_once} at a time"
+        dem = ""
+        if missing:
+            minutes = _minutes(sum(missing.values()) / 2000.0 * DEM_SECONDS_PER_SIM)
+            dem = f", plus about {minutes} to generate {len(missing)} dataset(s) first"
+        print(
+            f"sweep: {n} job{'s' if n != 1 else ''}, about {_minutes(wall)} ({how}) on a 2-core "
+            f"CPU like the reference machine{dem}",
+            flush=True,
+        )
+
+
+def _missing_dataset(job: DictConfig) -> dict[str, float]:
+    """``{cache file: particles x simulations}`` of the job's built-in dataset when it is not
+    in the cache yet (empty when it is)."""
+    from gripdem.dem.config import GeneratorConfig
+    from gripdem.dem.output import dataset_path
+    from gripdem.runner.outputs import plain
+
+    config = GeneratorConfig.from_mappings(
+        plain(job.scene),
+        plain(job.preset),
+        seed=int(job.data_seed),
+        backend=job.get("generator_backend", "numba"),
+    )
+    path = dataset_path(config)
+    if path.exists():
+        return {}
+    return {str(path): float(config.sims * config.preset.particles)}
+
+
+def _jobs_at_once(config: DictConfig, n_jobs: int) -> int:
+    """How many jobs the sweep's launcher runs at once (the parallel launcher's plan)."""
+    launcher = config.hydra.launcher
+    if not str(launcher.get("_target_", "")).endswith("ParallelLauncher"):
+        return 1
+    from gripdem.runner.parallel_launcher import plan_parallel
+
+    trainer = config.get("trainer", {})
+    uses_gpu = str(trainer.get("accelerator", "cpu")) not in ("cpu", "auto")
+    try:
+        at_once, _ = plan_parallel(launcher.get("n_jobs"), config.get("torch_threads"), uses_gpu)
+    except ValueError:
+        return 1  # the launcher itself refuses it, with its own message
+    return max(1, min(at_once, n_jobs))

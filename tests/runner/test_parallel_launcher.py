@@ -1,0 +1,138 @@
+"""The default multirun launcher (hydra/launcher=parallel): jobs side by side in their own
+processes, no oversubscription, a failed job named with its error while the others complete,
+and a stopped or killed sweep leaves no job running (gripdem.runner.parallel_launcher)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from gripdem.runner.parallel_launcher import available_cpus, plan_parallel
+
+
+def sweep_command(sweep: Path, *overrides: str) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "gripdem.run",
+        "-m",
+        "experiment=smoke",
+        *overrides,
+        f"hydra.sweep.dir={sweep}",
+    ]
+
+
+def env_of(data_root: Path) -> dict[str, str]:
+    env = {**os.environ, "GRIPDEM_DATA": str(data_root)}
+    env.pop("GRIPDEM_TRACEBACK", None)
+    return env
+
+
+def test_plan_never_oversubscribes(monkeypatch):
+    monkeypatch.setattr("gripdem.runner.parallel_launcher.available_cpus", lambda: 2)
+    assert plan_parallel(None, None, False) == (2, 1)  # the measured default on 2 cores
+    assert plan_parallel(None, 2, False) == (1, 2)
+    assert plan_parallel(None, None, True) == (1, 2)  # one GPU: one job at a time
+    assert plan_parallel(1, None, False) == (1, 2)
+    with pytest.raises(ValueError, match="hydra.launcher.n_jobs=2 jobs x torch_threads=2"):
+        plan_parallel(2, 2, False)
+    with pytest.raises(ValueError, match="n_jobs must be >= 1"):
+        plan_parallel(0, None, False)
+    assert available_cpus() >= 1
+
+
+def test_jobs_run_side_by_side_and_a_failed_job_is_named(
+    tmp_path, gripdem_data_root, tiny_pbc_path
+):
+    """Two jobs at once: one completes (metrics, its own log and TensorBoard run), one fails
+    on its data; the summary names the failed job with its error and the command ends with
+    status 1 after writing it."""
+    sweep = tmp_path / "sweep"
+    proc = subprocess.run(
+        sweep_command(
+            sweep,
+            "split=custom",
+            "split.horizon=5",
+            "split.history=10,900",
+            "hydra/launcher=parallel",
+            "hydra.launcher.n_jobs=2",
+        ),
+        env=env_of(gripdem_data_root),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "launching 2 job(s), 2 at a time with 1 torch thread(s) each" in proc.stdout
+    ok, failed = sweep / "0", sweep / "1"
+    metrics = json.loads((ok / "metrics.json").read_text())
+    assert metrics["hparams"]["split"] == "10-5"
+    assert list((ok / "tensorboard").glob("events.out.tfevents*"))
+    assert (ok / "console.log").exists() and (failed / "console.log").exists()
+    error = (failed / "error.txt").read_text()
+    assert "900" in error and not (failed / "metrics.json").exists()
+    summary = (sweep / "summary.md").read_text()
+    assert "| ok |" in summary and f"failed: {error.strip()}" in summary
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and "job 1 (" in lines[0] and "split.history=900" in lines[0]
+    assert "split.history=10" not in lines[0]  # only the failed job is named
+
+
+def _wait_for(predicate, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.2)
+    return False
+
+
+def _job_pids(sweep: Path) -> list[int]:
+    """Process ids of the jobs of ``sweep`` that are still running (their command line names
+    the job folder)."""
+    pids = []
+    for proc_dir in Path("/proc").iterdir():
+        if not proc_dir.name.isdigit():
+            continue
+        try:
+            cmdline = (proc_dir / "cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            continue
+        if f"hydra.run.dir={sweep}" in cmdline:
+            pids.append(int(proc_dir.name))
+    return pids
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGKILL])
+def test_a_stopped_or_killed_sweep_leaves_no_job_running(
+    tmp_path, gripdem_data_root, tiny_pbc_path, signum
+):
+    sweep = tmp_path / "sweep"
+    proc = subprocess.Popen(
+        sweep_command(sweep, "model=grip,vct", "trainer.max_epochs=50", "hydra/launcher=parallel"),
+        env=env_of(gripdem_data_root),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert _wait_for(lambda: len(_job_pids(sweep)) == 2, 120), "jobs did not start"
+        assert _wait_for(lambda: (sweep / "0" / "tensorboard").exists(), 120)
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    if signum == signal.SIGTERM:
+        assert proc.returncode == 143 and "interrupted:" in err, err[-2000:]
+    assert _wait_for(lambda: not _job_pids(sweep), 30), "a job outlived its sweep"
+    leftovers = [p for p in sweep.rglob("*") if ".tmp" in p.name]
+    assert not leftovers, leftovers

@@ -49,11 +49,18 @@ DEM_SECONDS_PER_SIM = 30.0
 PARALLEL_SLOWDOWN = 1.3
 
 
+def _value(option: Any) -> str:
+    """A config option's value as a string (an enum of the schema or a plain string)."""
+    return str(getattr(option, "value", option))
+
+
 def job_seconds(cfg: DictConfig) -> float:
     """A rough estimate of one job's wall time on the reference machine (see module doc)."""
     model = cfg.model
-    encoder = str(getattr(model.encoder.name, "value", model.encoder.name))
-    base, per_frame = SECONDS_PER_STEP.get((encoder, str(model.decoder)), (0.05, 0.01))
+    kind = (_value(model.encoder.name), _value(model.decoder))
+    if kind not in SECONDS_PER_STEP:
+        raise ValueError(f"no measured step rate for encoder/decoder {kind}")
+    base, per_frame = SECONDS_PER_STEP[kind]
     horizon = int(cfg.split.horizon)
     model_horizon = min(int(model.horizon or horizon), horizon)
     history = cfg.data.history_len or cfg.split.history

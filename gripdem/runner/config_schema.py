@@ -216,9 +216,18 @@ def register() -> None:
     ConfigStore.instance().store(name="config_schema", node=ConfigSchema)
 
 
-def check_combination(cfg: DictConfig) -> None:
+def check_combination(cfg: DictConfig, notes: bool = True) -> None:
     """Scene x model x data specifics, in one place. Raises on what cannot work, logs what
-    works but is probably not meant."""
+    works but is probably not meant (``notes=False``: checks only; the runner checks every
+    job before it starts and again, with the notes, inside the job)."""
+    if not notes:
+        previous = log.disabled
+        log.disabled = True
+        try:
+            check_combination(cfg)
+        finally:
+            log.disabled = previous
+        return
     mode = str(cfg.model.decoder_mode.value)
     boundary = cfg.scene.get("boundary")
     if cfg.data.encoding != cfg.model.encoding:
@@ -245,11 +254,16 @@ def check_combination(cfg: DictConfig) -> None:
             "model.encoder.name=interaction needs the exact frame: model.encoding=unwrapped, "
             f"got {cfg.model.encoding.value}"
         )
-    if cfg.model.ar_prior and not exact:
-        raise ValueError(
-            "model.ar_prior=true adds the linear AR forecast in the exact frame: it needs "
-            f"model.encoding=unwrapped, got {cfg.model.encoding.value}"
-        )
+    for option, on in (
+        ("ar_prior=true", cfg.model.ar_prior),
+        ("zero_mean=true", cfg.model.zero_mean),
+        ("history_noise>0", cfg.model.history_noise > 0),
+    ):
+        if on and not exact:
+            raise ValueError(
+                f"model.{option} works in the exact frame: it needs model.encoding=unwrapped, "
+                f"got {cfg.model.encoding.value} (the paper's models: leave it at its default)"
+            )
     if not exact:
         log.info(
             "model.encoding=%s: the paper's wrapped-space decoding (for reproduction; not exact "

@@ -258,12 +258,14 @@ def test_model(model, dm: TrajectoryDataModule, test_trainer, logger, step: int)
 def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     """Train and test one configuration; returns the metrics written to ``metrics.json``."""
     out_dir = Path(out_dir)
+    run_started = time.perf_counter()
     quiet_console()
     if cfg.torch_threads:
         torch.set_num_threads(int(cfg.torch_threads))
     check_combination(cfg)
     L.seed_everything(int(cfg.seed), workers=True)
     data_path = resolve_data_path(cfg)
+    data_seconds = time.perf_counter() - run_started  # the built-in DEM, when not cached
     dm = build_datamodule(cfg, data_path)
     source = load_source(cfg)  # fine-tuning: start from a trained model (model.init_from)
     if source is not None:
@@ -361,6 +363,9 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     write_outputs(
         cfg, out_dir, predictions, logger, trainer.global_step, physics_report, report["scores"]
     )
+    # the job's wall time: the dataset (generated or found), then everything else
+    report["data_seconds"] = data_seconds
+    report["run_seconds"] = time.perf_counter() - run_started
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
     logger.finalize("success")
     title = f"{cfg.scene.name} / {cfg.split.name} / {cfg.model.name} (seed {cfg.seed})"

@@ -17,6 +17,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
 from gripdem.evaluation.sweep_summary import collect, write_summary
+from gripdem.runner.console import report_error
 
 log = logging.getLogger(__name__)
 
@@ -42,4 +43,6 @@ class SweepSummary(Callback):
                 f"{job.error}"
                 for job in failed
             )
-            raise SweepJobsFailed(f"{len(failed)} job(s) of the sweep failed: {named}")
+            # Hydra turns a callback's exception into a warning: end the command here
+            report_error(SweepJobsFailed(f"{len(failed)} job(s) of the sweep failed: {named}"))
+            raise SystemExit(1)

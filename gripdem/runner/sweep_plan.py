@@ -19,6 +19,8 @@ job's data, baseline and test time measured on the same machine
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from hydra.core.global_hydra import GlobalHydra
@@ -27,6 +29,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from gripdem.runner.config_schema import check_combination
+from gripdem.runner.console import report_error
 
 log = logging.getLogger(__name__)
 
@@ -92,13 +95,29 @@ def expand_jobs(config: DictConfig) -> list[list[str]] | None:
     return BasicSweeper.split_arguments(overrides, None)[0]
 
 
+@contextmanager
+def errors_end_the_command() -> Iterator[None]:
+    """Hydra turns an exception raised in a callback into a warning and goes on; a user error
+    found here must end the command before anything is written: its one line, status 1."""
+    try:
+        yield
+    except ValueError as exc:
+        report_error(exc)
+        raise SystemExit(1) from None
+
+
 class SweepPlan(Callback):
     """Checks and cost estimate before a run or a sweep starts (see the module doc)."""
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        check_combination(config)
+        with errors_end_the_command():
+            check_combination(config, notes=False)
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        with errors_end_the_command():
+            self._plan(config)
+
+    def _plan(self, config: DictConfig) -> None:
         jobs = expand_jobs(config)
         if jobs is None:
             trials = config.hydra.sweeper.get("n_trials")
@@ -109,7 +128,7 @@ class SweepPlan(Callback):
         for overrides in jobs:
             job = loader.load_sweep_config(config, list(overrides))
             try:
-                check_combination(job)
+                check_combination(job, notes=False)
             except ValueError as exc:
                 raise ValueError(f"job {' '.join(overrides) or '(no overrides)'}: {exc}") from exc
             total += job_seconds(job)

@@ -1,0 +1,152 @@
+"""The mission's command, timed end to end and per job: ``python -m gripdem.run -m
+split=190-10,100-100 model=vct`` as a user runs it.
+
+    python experiments/benchmarks/mission_command.py [--variant parallel sequential]
+        [--repo DIR] [--extra trainer.max_steps=100] [--fresh-data] [--out experiments/results]
+
+Each variant runs the command once in a subprocess (in ``--repo``, default this checkout,
+with that checkout's own ``.venv``) into a temporary sweep folder and reports its wall time
+and, per job (from the job's ``metrics.json``): training seconds, optimiser steps and steps per
+second, the rest of the job (data loading, the AR fit, validation, the chained test and the
+outputs), and the test RMSE over constant velocity's and the linear AR filter's with the
+overlap at the last predicted frame.
+
+- ``parallel``: the default launcher (jobs side by side, one torch thread each on 2 cores);
+- ``sequential``: ``hydra.launcher.n_jobs=1`` (one job after another with every thread).
+
+``--fresh-data`` points ``GRIPDEM_DATA`` at an empty folder, so the first job generates the
+scene with the built-in DEM (a fresh clone's first sweep); by default the cached dataset is
+used. ``--extra`` adds overrides to every variant, e.g. ``trainer.max_steps=100`` to time a
+slow older checkout on a short budget (its per-step rate then extrapolates to the full budget:
+the report says so). Writes ``mission_command.md`` / ``.json`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchlib import machine_line, markdown_table
+
+ROOT = Path(__file__).resolve().parents[2]
+COMMAND = ["-m", "split=190-10,100-100", "model=vct"]
+VARIANTS = {"parallel": [], "sequential": ["hydra.launcher.n_jobs=1"]}
+
+
+def run_variant(repo: Path, variant: str, extra: list[str], data_root: str | None) -> dict:
+    sweep = Path(tempfile.mkdtemp(prefix=f"mission-{variant}-"))
+    env = dict(os.environ)
+    if data_root is not None:
+        env["GRIPDEM_DATA"] = data_root
+    python = repo / ".venv" / "bin" / "python"
+    command = [str(python if python.exists() else sys.executable), "-m", "gripdem.run"]
+    command += [*COMMAND, *VARIANTS[variant], *extra, f"hydra.sweep.dir={sweep}"]
+    start = time.perf_counter()
+    proc = subprocess.run(command, cwd=repo, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise RuntimeError(f"{variant}: exit {proc.returncode}\n{proc.stderr[-3000:]}")
+    jobs = []
+    for job_dir in sorted(p for p in sweep.iterdir() if (p / "metrics.json").exists()):
+        metrics = json.loads((job_dir / "metrics.json").read_text())
+        jobs.append(
+            {
+                "job": job_dir.name,
+                "split": metrics["hparams"]["split"],
+                "train_s": metrics["train_seconds"],
+                "data_s": metrics.get("data_seconds", float("nan")),
+                "run_s": metrics.get("run_seconds", float("nan")),
+                "steps": metrics["steps"],
+                "ratio_cv": metrics["test/rmse_ratio_constant_velocity"],
+                "ratio_ar": metrics["test/rmse_ratio_linear_ar"],
+                "overlap": metrics["test/physics/model/overlap_fraction"],
+            }
+        )
+    return {"variant": variant, "wall_s": wall, "sweep": str(sweep), "jobs": jobs}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--variant", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--repo", type=Path, default=ROOT)
+    parser.add_argument("--extra", nargs="*", default=[])
+    parser.add_argument("--fresh-data", action="store_true")
+    parser.add_argument("--out", type=Path, default=ROOT / "experiments" / "results")
+    parser.add_argument("--name", default="mission_command")
+    args = parser.parse_args(argv)
+    commit = subprocess.run(
+        ["git", "-C", str(args.repo), "rev-parse", "--short", "HEAD"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout.strip()
+    results = []
+    for variant in args.variant:
+        data_root = tempfile.mkdtemp(prefix="mission-data-") if args.fresh_data else None
+        results.append(run_variant(args.repo, variant, args.extra, data_root))
+    rows = []
+    for r in results:
+        for j in r["jobs"]:
+            rows.append(
+                [
+                    r["variant"],
+                    f"{r['wall_s'] / 60:.2f}",
+                    j["split"],
+                    f"{j['run_s']:.0f}",
+                    f"{j['data_s']:.0f}",
+                    f"{j['train_s']:.0f}",
+                    f"{j['run_s'] - j['data_s'] - j['train_s']:.0f}",
+                    j["steps"],
+                    f"{j['steps'] / j['train_s']:.1f}",
+                    f"{j['ratio_cv']:.3f}",
+                    f"{j['ratio_ar']:.3f}",
+                    f"{100 * j['overlap']:.2f}",
+                ]
+            )
+    lines = [
+        f"# `python -m gripdem.run {' '.join(COMMAND)}`",
+        "",
+        f"{datetime.date.today()}, commit {commit} ({args.repo}), "
+        f"{'fresh data (DEM included)' if args.fresh_data else 'cached data'}"
+        + (f", extra overrides: {' '.join(args.extra)}" if args.extra else ""),
+        "",
+        machine_line(),
+        "",
+        markdown_table(
+            [
+                "launcher",
+                "wall (min)",
+                "job",
+                "job (s)",
+                "data (s)",
+                "train (s)",
+                "rest (s)",
+                "steps",
+                "steps/s",
+                "÷ CV",
+                "÷ AR",
+                "overlap %",
+            ],
+            rows,
+        ),
+        "",
+    ]
+    text = "\n".join(lines)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{args.name}.md").write_text(text)
+    (args.out / f"{args.name}.json").write_text(
+        json.dumps({"commit": commit, "machine": machine_line(), "results": results}, indent=1)
+    )
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

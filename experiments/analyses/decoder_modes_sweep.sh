@@ -10,4 +10,6 @@ out=${1:-multirun/decoder_modes}
 python=${PYTHON:-.venv/bin/python}
 "$python" -m gripdem.run -m scene=pbc,lebc split=190-10,100-100 model=grip,pct,vct seed=0,1,2 \
   hydra.sweep.dir="$out" || true  # a failed job is named in the summary; report the others
-"$python" experiments/analyses/sweep_report.py "$out" --out experiments/results/decoder_modes
+"$python" experiments/analyses/sweep_report.py "$out" --out experiments/results --name decoder_modes
+"$python" experiments/analyses/mode_differences.py "$out"
+"$python" -m gripdem.claims "$out" --out experiments/results/decoder_modes_claims

@@ -1,10 +1,11 @@
 """Results of a model x split x seed sweep: tables (mean ± std over seeds) and figures.
 
     python experiments/analyses/sweep_report.py SWEEP_DIR [SWEEP_DIR ...]
-        [--out experiments/figures]
+        [--out experiments/figures] [--name results]
 
 Reads every job's ``metrics.json`` (through :func:`gripdem.evaluation.sweep_summary.collect`),
-groups the jobs by (scene, split, model) over seeds and writes into ``--out``:
+groups the jobs by (scene, split, model) over seeds and writes into ``--out`` (file names from
+``--name``, default ``results``):
 
 - ``results.md``: per scene, RMSE / d and the ratio to constant velocity (CV) and to the linear
   AR baseline as mean ± std over seeds, beside CV, AR and the mean-flow profile, LE crossers
@@ -239,6 +240,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sweeps", nargs="+", help="multirun folders")
     parser.add_argument("--out", default="experiments/figures", help="output folder")
+    parser.add_argument(
+        "--name", default="results", help="file stem: NAME.md, NAME_rmse_by_split.png, ..."
+    )
     args = parser.parse_args(argv)
     groups = load(args.sweeps)
     if not groups:
@@ -249,13 +253,13 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     markdown = results_markdown(groups)
-    with atomic_path(out / "results.md", overwrite=True) as tmp:
+    with atomic_path(out / f"{args.name}.md", overwrite=True) as tmp:
         tmp.write_text(markdown)
     print(markdown)
     figures = {
-        "results_rmse_by_split": plot_rmse_by_split(groups, ratio=False),
-        "results_ratio_to_cv": plot_rmse_by_split(groups, ratio=True),
-        "results_time_to_accuracy": plot_time_to_accuracy(groups),
+        f"{args.name}_rmse_by_split": plot_rmse_by_split(groups, ratio=False),
+        f"{args.name}_ratio_to_cv": plot_rmse_by_split(groups, ratio=True),
+        f"{args.name}_time_to_accuracy": plot_time_to_accuracy(groups),
     }
     for name, fig in figures.items():
         if fig is not None:

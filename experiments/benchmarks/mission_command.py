@@ -1,7 +1,7 @@
 """The mission's command, timed end to end and per job: ``python -m gripdem.run -m
 split=190-10,100-100 model=vct`` as a user runs it.
 
-    python experiments/benchmarks/mission_command.py [--variant parallel sequential]
+    python experiments/benchmarks/mission_command.py [--variant default sequential]
         [--repo DIR] [--extra trainer.max_steps=100] [--fresh-data] [--out experiments/results]
 
 Each variant runs the command once in a subprocess (in ``--repo``, default this checkout,
@@ -11,7 +11,8 @@ second, the rest of the job (data loading, the AR fit, validation, the chained t
 outputs), and the test RMSE over constant velocity's and the linear AR filter's with the
 overlap at the last predicted frame.
 
-- ``parallel``: the default launcher (jobs side by side, one torch thread each on 2 cores);
+- ``default``: the checkout's own launcher (here: jobs side by side, one torch thread each on
+  2 cores; before the parallel launcher: Hydra's basic one, one after another);
 - ``sequential``: ``hydra.launcher.n_jobs=1`` (one job after another with every thread).
 
 ``--fresh-data`` points ``GRIPDEM_DATA`` at an empty folder, so the first job generates the
@@ -37,7 +38,9 @@ from benchlib import machine_line, markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMAND = ["-m", "split=190-10,100-100", "model=vct"]
-VARIANTS = {"parallel": [], "sequential": ["hydra.launcher.n_jobs=1"]}
+#: default: the checkout's own launcher (this one's: jobs side by side; older ones: one after
+#: another); sequential: one job at a time with every thread (the parallel launcher's n_jobs=1)
+VARIANTS = {"default": [], "sequential": ["hydra.launcher.n_jobs=1"]}
 
 
 def run_variant(repo: Path, variant: str, extra: list[str], data_root: str | None) -> dict:

@@ -11,13 +11,18 @@ predicted frame is wrapped with its own offset, so the LE shift and the velocity
 crossing are applied analytically (SPEC §11). With every learned output zero a model IS the CV
 baseline (to float64 round-off), in both scenes, at every split.
 
-=======  ===========================  ==========================  =========================
-mode     decoder state                GRU output per step         loss (relative to CV's)
-=======  ===========================  ==========================  =========================
-grip     velocity (normalised)        velocity change             positions over the horizon
-pct      position (box lengths)       step deviation from CV      positions over the horizon
-vct      position (box lengths)       step deviation from CV      per-step displacements
-=======  ===========================  ==========================  =========================
+=======  ==============================  ==========================  ==========================
+mode     decoder input (direct; GRU)     output per step             loss (relative to CV's)
+=======  ==============================  ==========================  ==========================
+grip     last velocity (normalised)      velocity change             positions over the horizon
+pct      last position: sin/cos per      step deviation from CV      positions over the horizon
+         axis (direct); the position in
+         box lengths, advanced (GRU)
+vct      as pct                          step deviation from CV      per-step displacements
+=======  ==============================  ==========================  ==========================
+
+The direct decoder (:mod:`gripdem.nn.direct`, the default of every mode) reads its input beside
+each particle's context vector (:func:`direct_state`); the GRU decoder carries it as a state.
 
 The losses are ``mean|pred - true|^2 / mean|true - CV|^2`` on the batch: 1 at the start, and the
 square of the RMSE ratio to CV when trained on positions. In this frame PCT and VCT differ by

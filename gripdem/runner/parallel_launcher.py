@@ -17,7 +17,8 @@ line), returns NaN to the sweeper, and leaves the other jobs running; the sweep'
 names it.
 
 Stopping: Ctrl-C reaches every job (one process group) and each answers with its one
-``interrupted:`` line in its console.log; SIGTERM to the sweep is forwarded to every job;
+``interrupted:`` line in its console.log (a job still running 5 s later gets SIGTERM); SIGTERM
+to the sweep is forwarded to every job;
 if the sweep process is killed outright, the kernel sends each job SIGTERM
 (``PR_SET_PDEATHSIG``), so no job outlives it. Every file a job writes is written atomically.
 """
@@ -39,7 +40,7 @@ from typing import Any
 from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from omegaconf import DictConfig, open_dict
 
-from gripdem.runner.console import SWEEP_JOB_ENV
+from gripdem.runner.console import SWEEP_JOB_ENV, Terminated
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +48,8 @@ log = logging.getLogger(__name__)
 POLL_SECONDS = 0.2
 #: seconds a job gets to stop after SIGTERM before SIGKILL
 STOP_SECONDS = 20.0
+#: seconds the jobs get to answer a terminal's Ctrl-C themselves before they are sent SIGTERM
+CTRL_C_SECONDS = 5.0
 
 
 def available_cpus() -> int:
@@ -155,6 +158,17 @@ class _Job:
         return ret
 
 
+def _wait(jobs: list[_Job], seconds: float) -> None:
+    """Give running jobs ``seconds`` to end on their own."""
+    deadline = time.monotonic() + seconds
+    for job in jobs:
+        if job.process is not None:
+            try:
+                job.process.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                return
+
+
 def _stop(jobs: list[_Job]) -> None:
     """SIGTERM to every running job (each answers like Ctrl-C), SIGKILL after a grace."""
     running = [j.process for j in jobs if j.process is not None and j.process.poll() is None]
@@ -209,7 +223,9 @@ def launch_jobs(
             for job in [j for j in running if j.process.poll() is not None]:
                 running.remove(job)
                 results[job.number] = job.result(metric)
-    except BaseException:  # Ctrl-C, SIGTERM (console turns it into KeyboardInterrupt), a bug
+    except BaseException as exc:  # Ctrl-C, SIGTERM (a KeyboardInterrupt here), a bug
+        if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, Terminated):
+            _wait(running, CTRL_C_SECONDS)  # a terminal's Ctrl-C reached every job too
         _stop(running)
         raise
     return [results[job.number] for job in jobs]

@@ -36,6 +36,7 @@ class SweepSummary(Callback):
             return
         print(markdown)
         print(f"sweep summary: {md} and {csv_path}")
+        print(f"compare the runs: tensorboard --logdir {sweep_dir}")
         failed = [job for job in collect(sweep_dir) if job.error is not None]
         if failed:
             named = "; ".join(

@@ -71,6 +71,7 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     )
     assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "launching 2 job(s), 2 at a time with 1 torch thread(s) each" in proc.stdout
+    assert f"compare the runs: tensorboard --logdir {sweep}" in proc.stdout
     ok, failed = sweep / "0", sweep / "1"
     metrics = json.loads((ok / "metrics.json").read_text())
     assert metrics["hparams"]["split"] == "10-5"
@@ -111,10 +112,12 @@ def _job_pids(sweep: Path) -> list[int]:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGKILL])
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGKILL", "Ctrl-C"])
 def test_a_stopped_or_killed_sweep_leaves_no_job_running(
-    tmp_path, gripdem_data_root, tiny_pbc_path, signum
+    tmp_path, gripdem_data_root, tiny_pbc_path, how
 ):
+    """SIGTERM to the sweep (forwarded to its jobs), SIGKILL (the kernel's parent-death
+    signal stops them) and a terminal's Ctrl-C (SIGINT to the whole process group)."""
     sweep = tmp_path / "sweep"
     proc = subprocess.Popen(
         sweep_command(sweep, "model=grip,vct", "trainer.max_epochs=50", "hydra/launcher=parallel"),
@@ -122,17 +125,24 @@ def test_a_stopped_or_killed_sweep_leaves_no_job_running(
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        start_new_session=True,  # its own process group, as a terminal gives a command
     )
     try:
         assert _wait_for(lambda: len(_job_pids(sweep)) == 2, 120), "jobs did not start"
         assert _wait_for(lambda: (sweep / "0" / "tensorboard").exists(), 120)
-        proc.send_signal(signum)
+        if how == "Ctrl-C":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(getattr(signal, how))
         out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
-    if signum == signal.SIGTERM:
-        assert proc.returncode == 143 and "interrupted:" in err, err[-2000:]
+    if how != "SIGKILL":
+        assert proc.returncode in (130, 143) and "interrupted:" in err, err[-2000:]
+    if how == "Ctrl-C":  # every job answered it itself
+        for job in ("0", "1"):
+            assert "interrupted:" in (sweep / job / "console.log").read_text()
     assert _wait_for(lambda: not _job_pids(sweep), 30), "a job outlived its sweep"
     leftovers = [p for p in sweep.rglob("*") if ".tmp" in p.name]
     assert not leftovers, leftovers

@@ -148,6 +148,17 @@ class TrajectoryDecoder(nn.Module):
             for _ in range(n_heads)
         )
 
+    def _flat(self, features, state, base, drift):
+        """The inputs with batch and particles on one nodes axis, in the features' dtype, and
+        the state update's fold and shift in that dtype."""
+        b, n, t, c = features.shape
+
+        def nodes(x: torch.Tensor | None) -> torch.Tensor | None:
+            return None if x is None else x.reshape(b * n, -1).to(features.dtype)
+
+        fold, shift = self.fold.to(features.dtype), self.shift.to(features.dtype)
+        return features.reshape(b * n, t, c), nodes(state), nodes(base), nodes(drift), fold, shift
+
     def forward(
         self,
         features: torch.Tensor,
@@ -156,13 +167,12 @@ class TrajectoryDecoder(nn.Module):
         horizon: int,
         drift: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        b, n, t, c = features.shape
-        flat = features.reshape(b * n, t, c)
-        flat_state = state.reshape(b * n, -1).to(features.dtype)
-        flat_base = None if base is None else base.reshape(b * n, -1).to(features.dtype)
-        fold, shift = self.fold.to(features.dtype), self.shift.to(features.dtype)
-        if drift is not None:
-            shift = shift + drift.reshape(b * n, -1).to(features.dtype)
+        b, n = features.shape[:2]
+        flat, flat_state, flat_base, flat_drift, fold, shift = self._flat(
+            features, state, base, drift
+        )
+        if flat_drift is not None:
+            shift = shift + flat_drift
         first = self.heads[0]
         hidden = torch.stack([head.initial_hidden(flat) for head in self.heads], dim=1)
         outputs = decode_heads(
@@ -189,12 +199,10 @@ class TrajectoryDecoder(nn.Module):
     ) -> torch.Tensor:
         """:meth:`forward` through each head's own cell-by-cell loop (the reference the
         batched loop is tested and benchmarked against; same arguments and result)."""
-        b, n, t, c = features.shape
-        flat = features.reshape(b * n, t, c)
-        flat_state = state.reshape(b * n, -1)
-        flat_base = None if base is None else base.reshape(b * n, -1)
-        flat_drift = None if drift is None else drift.reshape(b * n, -1).to(features.dtype)
-        fold, shift = self.fold.to(features.dtype), self.shift.to(features.dtype)
+        b, n = features.shape[:2]
+        flat, flat_state, flat_base, flat_drift, fold, shift = self._flat(
+            features, state, base, drift
+        )
         outputs = [
             head(flat, flat_state, flat_base, horizon, fold, shift, flat_drift)
             for head in self.heads

@@ -2,17 +2,21 @@
 
 :class:`gripdem.nn.seq2seq.Seq2SeqGRU` holds each head's weights in ``nn.GRU`` / ``nn.Linear``
 modules (so model files keep their keys); its own ``forward`` is the reference, one
-``nn.GRU`` call per head and per step. On a CPU that loop is dominated by the work per call,
-not by arithmetic: ``horizon x n_heads`` GRU calls of a few small matrix products each, and as
-many again in the backward pass. :func:`decode_heads` runs the same recurrence for every head
-in one batched product per gate block (``torch.baddbmm`` over a leading heads axis), with
+``nn.GRU`` call per head and per step (``horizon x n_heads`` calls, as many again in the
+backward pass). :func:`decode_heads` runs the same recurrence for every head in one batched
+product per gate block (``torch.baddbmm`` over a leading heads axis), with
 
 - the layer-0 input projection out of the loop: the decoder's input (its state) advances by
   an affine map of the previous output, ``state_k = state_{k-1} + out_k @ fold + shift``, so
   its projection does too: ``gi_k = gi_{k-1} + out_k @ (fold @ W_ih) + shift @ W_ih``, with
   ``fold @ W_ih`` and ``shift @ W_ih`` formed once per sequence;
-- the reset and update gates in one fused add + sigmoid;
+- the reset and update gates in one add + sigmoid;
 - nothing per step in Python but the loop itself.
+
+Measured (``decoder_loop.py``, 2-core machine, one thread): 1.0-1.1x the reference loop,
+forward and backward, at hidden 32 and 350, horizons 10 and 100. The loop is bound by its
+matrix products and the memory traffic of its gate arithmetic, which batching does not reduce;
+what made the decoder modes fast is the direct decoder (no loop, :mod:`gripdem.nn.direct`).
 
 Equal to the reference to float round-off (tested, and side by side in
 ``experiments/benchmarks/decoder_loop.py``); dropout between layers draws other random numbers.
@@ -45,41 +49,17 @@ def stacked_gru_weights(grus: list[nn.GRU], layers: int):
     ]
 
 
-class _GRUCell(torch.autograd.Function):
-    """One GRU cell of every head ``(heads, M, H)``, its input projection ``gi`` ``(heads, M,
-    3H)`` given, with a hand-written backward: the gate algebra of ``nn.GRU`` (r, z, n in that
-    order; ``n = tanh(gi_n + r * (h W_hn + b_hn))``; ``h' = n + z (h - n)``) in a few fused
-    tensor ops, where autograd would record and replay about twenty small ones per cell."""
-
-    @staticmethod
-    def forward(ctx, gi, h, w_hh, b_hh):
-        gh = torch.baddbmm(b_hh, h, w_hh)
-        hidden = h.shape[-1]
-        rz = torch.sigmoid(gi[..., : 2 * hidden] + gh[..., : 2 * hidden])
-        r, z = rz[..., :hidden], rz[..., hidden:]
-        hn = gh[..., 2 * hidden :]
-        n = torch.tanh(torch.addcmul(gi[..., 2 * hidden :], r, hn))
-        ctx.save_for_backward(h, w_hh, rz, n, hn)
-        return torch.addcmul(n, z, h - n)
-
-    @staticmethod
-    def backward(ctx, grad):
-        h, w_hh, rz, n, hn = ctx.saved_tensors
-        hidden = h.shape[-1]
-        r, z = rz[..., :hidden], rz[..., hidden:]
-        d_pre_n = grad * (1 - z) * (1 - n * n)  # through n = tanh(pre_n)
-        d_rz = torch.cat([d_pre_n * hn, grad * (h - n)], dim=-1) * rz * (1 - rz)
-        d_gi = torch.cat([d_rz, d_pre_n], dim=-1)
-        d_gh = torch.cat([d_rz, d_pre_n * r], dim=-1)
-        d_h = torch.baddbmm(grad * z, d_gh, w_hh.transpose(1, 2))
-        d_w = torch.bmm(h.transpose(1, 2), d_gh) if ctx.needs_input_grad[2] else None
-        d_b = d_gh.sum(dim=1, keepdim=True) if ctx.needs_input_grad[3] else None
-        return d_gi, d_h, d_w, d_b
-
-
 def _gru_cell(gi: torch.Tensor, h: torch.Tensor, w_hh: torch.Tensor, b_hh: torch.Tensor):
-    """One GRU cell of every head (see :class:`_GRUCell`)."""
-    return _GRUCell.apply(gi, h, w_hh, b_hh)
+    """One GRU cell of every head ``(heads, M, H)``, its input projection ``gi`` ``(heads, M,
+    3H)`` given: ``nn.GRU``'s gate algebra (r, z, n in that order;
+    ``n = tanh(gi_n + r * (h W_hn + b_hn))``; ``h' = n + z (h - n)``). A hand-written backward
+    of this cell measured no faster than autograd's (``decoder_loop.py``)."""
+    gh = torch.baddbmm(b_hh, h, w_hh)
+    hidden = h.shape[-1]
+    rz = torch.sigmoid(gi[..., : 2 * hidden] + gh[..., : 2 * hidden])
+    r, z = rz[..., :hidden], rz[..., hidden:]
+    n = torch.tanh(torch.addcmul(gi[..., 2 * hidden :], r, gh[..., 2 * hidden :]))
+    return torch.addcmul(n, z, h - n)
 
 
 def decode_heads(

@@ -115,6 +115,7 @@ DOCUMENTED = (
     "IncompatibleError",  # gripdem.inference.checkpoint
     "CheckpointError",  # gripdem.inference.model_file
     "ValidationFailed",  # gripdem.dem.output
+    "SweepJobsFailed",  # gripdem.runner.sweep_callback (a multirun with failed jobs)
     "FileNotFoundError",
     "FileExistsError",
     "IsADirectoryError",

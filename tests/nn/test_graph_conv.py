@@ -105,7 +105,9 @@ def test_vct_fold_adds_shift_channels_to_z():
         head.bias.copy_(torch.tensor([0, 0, 0, 0, 1.0, 2.0, 10.0, 20.0]))
     captured = []
     decoder.heads[0].decoder.register_forward_hook(lambda m, i, o: captured.append(i[0].clone()))
-    decoder(torch.randn(1, 1, 3, 8), torch.zeros(1, 1, 6), None, horizon=2)
+    # the cell-by-cell loop shows each step's input (the batched loop equals it:
+    # tests/nn/test_seq2seq.py)
+    decoder.reference_forward(torch.randn(1, 1, 3, 8), torch.zeros(1, 1, 6), None, horizon=2)
     # second decoder input = first state + real + shift on the z channels
     torch.testing.assert_close(captured[1].reshape(6), torch.tensor([0, 0, 0, 0, 11.0, 22.0]))
 
@@ -117,7 +119,7 @@ def test_state_update_is_affine_with_shift():
         decoder.heads[0].head.bias.fill_(1.0)
     captured = []
     decoder.heads[0].decoder.register_forward_hook(lambda m, i, o: captured.append(i[0].clone()))
-    decoder(torch.randn(1, 1, 3, 4), torch.zeros(1, 1, 6), None, horizon=3)
+    decoder.reference_forward(torch.randn(1, 1, 3, 4), torch.zeros(1, 1, 6), None, horizon=3)
     # state_k = state_{k-1} + 2 * 1 + shift
     torch.testing.assert_close(captured[2].reshape(6), 2 * (2.0 + shift))
     with pytest.raises(ValueError, match="shift must be"):

@@ -119,9 +119,18 @@ class SweepPlan(Callback):
 
     def _plan(self, config: DictConfig) -> None:
         jobs = expand_jobs(config)
-        if jobs is None:
-            trials = config.hydra.sweeper.get("n_trials")
-            print(f"sweep: {trials} trials chosen by the sweeper as it goes", flush=True)
+        if jobs is None:  # Optuna: trials chosen as it goes, each like the base config
+            check_combination(config, notes=False)
+            trials = int(config.hydra.sweeper.get("n_trials") or 1)
+            at_once = _jobs_at_once(config, int(config.hydra.sweeper.get("n_jobs") or 1))
+            wall = trials * job_seconds(config) / at_once
+            wall *= PARALLEL_SLOWDOWN if at_once > 1 else 1.0
+            print(
+                f"sweep: {trials} trials chosen by the sweeper as it goes, {at_once} at a time, "
+                f"about {_minutes(wall)} on a 2-core CPU like the reference machine "
+                "(at the base config's size)",
+                flush=True,
+            )
             return
         loader = GlobalHydra.instance().config_loader()
         total, missing = 0.0, {}

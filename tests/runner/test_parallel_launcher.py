@@ -77,6 +77,9 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     assert metrics["hparams"]["split"] == "10-5"
     assert list((ok / "tensorboard").glob("events.out.tfevents*"))
     assert (ok / "console.log").exists() and (failed / "console.log").exists()
+    # each job is a single run, whatever its overrides select (an Optuna trial whose overrides
+    # set hydra.mode=MULTIRUN would otherwise start a study of its own)
+    assert "mode: RUN" in (ok / ".hydra" / "hydra.yaml").read_text()
     error = (failed / "error.txt").read_text()
     assert "900" in error and not (failed / "metrics.json").exists()
     summary = (sweep / "summary.md").read_text()

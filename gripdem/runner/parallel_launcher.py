@@ -26,7 +26,6 @@ if the sweep process is killed outright, the kernel sends each job SIGTERM
 from __future__ import annotations
 
 import json
-import logging
 import math
 import os
 import signal
@@ -40,9 +39,8 @@ from typing import Any
 from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from omegaconf import DictConfig, open_dict
 
+from gripdem.evaluation.sweep_summary import ERROR_FILE
 from gripdem.runner.console import SWEEP_JOB_ENV, Terminated
-
-log = logging.getLogger(__name__)
 
 #: seconds between checks of the running jobs
 POLL_SECONDS = 0.2
@@ -90,15 +88,14 @@ def _job_dir(config: DictConfig) -> Path:
 
 def _return_value(job_dir: Path, metric: str) -> tuple[Any, str | None]:
     """The job's ``metric`` from its metrics.json and its error line (error.txt), if any."""
-    error_file = job_dir / "error.txt"
+    error_file = job_dir / ERROR_FILE
     if error_file.exists():
         return math.nan, error_file.read_text().strip()
     metrics_file = job_dir / "metrics.json"
     if not metrics_file.exists():
         return math.nan, "no metrics.json (see console.log)"
     metrics = json.loads(metrics_file.read_text())
-    flat = {**metrics, **metrics.get("metrics", {})}
-    value = flat.get(metric)
+    value = metrics.get(metric)
     if not isinstance(value, (int, float)):
         return math.nan, f"optimized_metric={metric!r} is not in metrics.json"
     return float(value), None

@@ -1,6 +1,6 @@
 """A sweep and its comparison: a Hydra multirun over two models, the summary table it writes,
-and the same numbers read back from the runs' TensorBoard event files (what ``tensorboard
---logdir`` plots side by side). The mission's sweep is the same command at full size:
+and the same numbers read back as TensorBoard shows them (runs named by what differs, HParams
+with the settings and the hp/ metrics). The mission's sweep is the same command at full size:
 ``python -m gripdem.run -m split=190-10,100-100 model=vct``.
 
     python examples/sweep_tensorboard.py [--out OUT] [--models grip,interaction]
@@ -13,19 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-
-def scalars(run: Path, tags: tuple[str, ...]) -> dict[str, float]:
-    """The last value of each of ``tags`` in a run's TensorBoard event files."""
-    out: dict[str, float] = {}
-    for events in sorted((run / "tensorboard").glob("events.out.tfevents*")):
-        acc = EventAccumulator(str(events))
-        acc.Reload()
-        for tag in tags:
-            if tag in acc.Tags()["scalars"]:
-                out[tag] = acc.Scalars(tag)[-1].value
-    return out
+from gripdem.evaluation.tensorboard_runs import read_runs
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -41,17 +29,18 @@ def main(argv: list[str] | None = None) -> None:
     print("$ python " + " ".join(command[1:]))
     subprocess.run(command, check=True)  # the runner prints the sweep's summary table
 
-    tags = ("hp/test_rmse", "hp/test_rmse_cv_baseline", "val/rmse_over_d")
-    print("from the TensorBoard event files:")
-    for run in sorted(p for p in args.out.iterdir() if (p / "tensorboard").is_dir()):
-        values = scalars(run, tags)
-        ratio = values["hp/test_rmse"] / values["hp/test_rmse_cv_baseline"]
-        model = (run / ".hydra" / "overrides.yaml").read_text().split("model=")[1].split()[0]
+    # TensorBoard on the folder above the sweep: each run is named <sweep>/<what differs>
+    print("as TensorBoard reads them:")
+    for name, run in read_runs(args.out.parent).items():
+        if not name.startswith(f"{args.out.name}/"):
+            continue  # another sweep in the same folder
+        hp = {k: v[-1][1] for k, v in run.scalars.items() if k.startswith("hp/")}
         print(
-            f"  job {run.name} ({model}): test RMSE / CV's {ratio:.3f}, last validation "
-            f"RMSE {values['val/rmse_over_d']:.4g} d"
+            f"  run {name} (model {run.hparams['model']}): test RMSE / CV's "
+            f"{hp['hp/ratio_cv']:.3f}, / AR's {hp['hp/ratio_ar']:.3f}, "
+            f"{hp['hp/seconds_training']:.1f} s of training"
         )
-    print(f"compare them: tensorboard --logdir {args.out}")
+    print(f"compare them: tensorboard --logdir {args.out.parent}")
 
 
 if __name__ == "__main__":

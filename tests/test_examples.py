@@ -66,15 +66,15 @@ def test_own_data_finetune_example(tmp_path, gripdem_data_root):
 def test_first_run_example(tmp_path, gripdem_data_root, tiny_pbc_path):
     out = run_example("first_run", gripdem_data_root, "--out", str(tmp_path / "run"))
     assert "checkpoints/best.safetensors" in out and "metrics.json" in out
-    assert re.search(r"tensorboard/events\.out\.tfevents", out)
+    assert re.search(r"events\.out\.tfevents", out)
     assert re.search(r"of constant velocity's \((beats|loses to) it\), in sample: False", out)
 
 
 @pytest.mark.first
 def test_sweep_tensorboard_example(tmp_path, gripdem_data_root, tiny_pbc_path):
     out = run_example("sweep_tensorboard", gripdem_data_root, "--out", str(tmp_path / "sweep"))
-    assert re.search(r"job 0 \(grip\): test RMSE / CV's [\d.]+", out)
-    assert re.search(r"job 1 \(interaction\): test RMSE / CV's [\d.]+", out)
+    assert re.search(r"run sweep/model=grip \(model grip\): test RMSE / CV's [\d.]+", out)
+    assert re.search(r"run sweep/model=interaction \(model interaction\): test RMSE", out)
 
 
 def test_the_readme_python_snippet_runs(tmp_path, gripdem_data_root):

@@ -36,7 +36,7 @@ def accuracy(run: Path) -> dict:
     for precision in ("fp32", "bf16"):
         model = load_checkpoint_model(run / "checkpoints" / "best.ckpt")
         model.encoder.to(torch.bfloat16 if precision == "bf16" else torch.float32)
-        metrics = test_model(model, dm, trainer, None, 0)["metrics"]
+        metrics = test_model(model, dm, trainer)["metrics"]
         out[precision] = metrics["test/rmse_ratio_constant_velocity"]
     out["bf16_over_fp32"] = out["bf16"] / out["fp32"]
     return out

@@ -112,3 +112,19 @@ def summarize(
         mask = crossing_mask(last_positions, true, box, offsets)
         out["rmse_crossers"], out["rmse_others"], out["n_crossers"] = rmse_split(res, mask)
     return out
+
+
+def shown_in_tensorboard(key: str) -> bool:
+    """Whether a validation/test metric (``stage/name``) goes to TensorBoard: values in
+    diameters and ratios, the loss and the ensemble's calibration; never one tag per step of
+    the horizon (``rmse_step/001``: those are one curve, ``horizon/...``) or metres."""
+    name = key.split("/", 1)[-1]
+    if "/" in name:
+        return False
+    if name == "loss":  # training's objective: for train and validation only
+        return not key.startswith("test/")
+    return (
+        name.endswith("_over_d")
+        or name.startswith("rmse_ratio_")
+        or name in ("spread_skill", "rank_max_over_uniform", "rank_min_over_uniform")
+    )

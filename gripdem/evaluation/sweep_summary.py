@@ -1,9 +1,10 @@
 """One table across the jobs of a multirun: ``python -m gripdem.summary SWEEP_DIR``.
 
 A job is a folder under ``SWEEP_DIR`` holding Hydra's ``.hydra/`` record; its metrics are its
-``metrics.json`` (nested mappings are flattened with ``/``). Rows are jobs (job number order);
-columns are the job folder, the overrides whose values differ between jobs (every override for a
-single job; from ``.hydra/overrides.yaml``, or the flattened ``.hydra/config.yaml`` when a job
+``metrics.json`` (nested mappings are flattened with ``/``). Rows are jobs in sweep order
+(``hydra.job.num``); columns are the job folder (named by what differs:
+:mod:`gripdem.runner.run_names`), the overrides whose values differ between jobs (every
+override for a single job; from ``.hydra/overrides.yaml``, or the flattened ``.hydra/config.yaml`` when a job
 has no overrides file), then the key metrics, chosen by glob patterns (:data:`DEFAULT_METRICS`,
 per-step RMSEs left out). A job without ``metrics.json`` (failed or still running) keeps its row
 with status ``no metrics.json``.
@@ -141,6 +142,17 @@ def _job_number(name: str) -> tuple:
     return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in Path(name).parts)
 
 
+def _sweep_order(hydra_dir: Path, name: str) -> tuple:
+    """Sort key of a job: its number in the sweep (``hydra.job.num``, recorded by Hydra in
+    ``.hydra/hydra.yaml``; folders are named by what differs), else its folder name."""
+    record = hydra_dir / "hydra.yaml"
+    if record.exists():
+        num = OmegaConf.select(OmegaConf.load(record), "hydra.job.num", default=None)
+        if isinstance(num, int):
+            return (0, num, _job_number(name))
+    return (1, 0, _job_number(name))
+
+
 def collect(sweep_dir: str | os.PathLike) -> list[Job]:
     """Every job under ``sweep_dir`` (a folder with ``.hydra/``), in job order."""
     sweep_dir = Path(sweep_dir)
@@ -167,8 +179,8 @@ def collect(sweep_dir: str | os.PathLike) -> list[Job]:
                 raise ValueError(f"{metrics_file}: not valid JSON ({exc})") from None
         error_file = folder / ERROR_FILE
         error = error_file.read_text().strip() if error_file.exists() else None
-        jobs.append(Job(name, params, metrics, error))
-    return sorted(jobs, key=lambda j: _job_number(j.name))
+        jobs.append((_sweep_order(hydra_dir, name), Job(name, params, metrics, error)))
+    return [job for _, job in sorted(jobs, key=lambda pair: pair[0])]
 
 
 def runs_by_group(sweeps: Iterable[str | os.PathLike]) -> dict[tuple[str, str, str], list[dict]]:

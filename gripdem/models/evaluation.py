@@ -23,11 +23,18 @@ from gripdem.evaluation.ensemble_scores import (
     rank_histogram,
     spread_skill_per_step,
 )
-from gripdem.evaluation.metrics import position_residuals, rmse_per_step, rmse_split
+from gripdem.evaluation.metrics import (
+    position_residuals,
+    rmse_per_step,
+    rmse_split,
+    shown_in_tensorboard,
+)
 from gripdem.models.baselines import predict_baseline
 
 #: the stage's scores on the progress bar (``prog_bar``; gripdem.runner.progress shows them as
-#: RMSE in diameters and over constant velocity's); every metric is logged under its own name
+#: RMSE in diameters and over constant velocity's); validation's metrics in diameters and
+#: ratios go to the logger (gripdem.evaluation.metrics.shown_in_tensorboard), the test's are
+#: logged by the runner at the last optimiser step
 PROGRESS_BAR = ("rmse_over_d", "rmse_ratio_constant_velocity")
 
 
@@ -143,12 +150,14 @@ class RolloutEvaluation:
         per_step = score(data["pred"], "rmse")
         for step, value in enumerate(per_step, start=1):
             metrics[f"{stage}/rmse_step/{step:03d}"] = float(value)
+        rmse_curves = {"model": (per_step / self.diameter).tolist()}
         for name in self.baselines:
-            score(data[name], f"rmse_{name}")
+            rmse_curves[name] = (score(data[name], f"rmse_{name}") / self.diameter).tolist()
             metrics[f"{stage}/rmse_ratio_{name}"] = (
                 metrics[f"{stage}/rmse"] / metrics[f"{stage}/rmse_{name}"]
             )
         metrics.update(self.ensemble_metrics(stage, data))
+        data["scores"]["rmse_over_d"] = rmse_curves  # per step of the horizon, each forecaster
         return metrics
 
     def ensemble_metrics(self, stage: str, data: dict[str, Any]) -> dict[str, float]:
@@ -207,10 +216,14 @@ class RolloutEvaluation:
         if not data:
             return {}
         metrics = data["metrics"]
-        shown = {f"{stage}/{name}" for name in PROGRESS_BAR}
+        on_bar = {f"{stage}/{name}" for name in PROGRESS_BAR}
         for key, value in metrics.items():
-            if not math.isnan(value):
-                self.log(key, value, prog_bar=key in shown, sync_dist=True)
+            # every metric reaches the callbacks (checkpoint, early stopping, the bar); the
+            # logger gets those in diameters and ratios, never one per horizon step
+            if "_step/" in key or math.isnan(value):
+                continue
+            logged = shown_in_tensorboard(key) and stage != "test"  # the test: at the last step
+            self.log(key, value, prog_bar=key in on_bar, logger=logged, sync_dist=True)
         return data
 
     def on_validation_epoch_end(self) -> None:

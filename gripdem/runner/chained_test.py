@@ -6,7 +6,7 @@ it beyond its horizon: :class:`gripdem.inference.stepper.Stepper` from each wind
 frames, in the stable setting (links of the model's horizon, contact correction after every
 frame), for the window's ``f`` frames. The predictions are recorded and scored exactly as the
 Lightning test step's (:meth:`gripdem.models.evaluation.RolloutEvaluation.record`), beside every
-baseline on the same windows, and logged to the run's logger.
+baseline on the same windows (the runner logs them).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from gripdem.inference.stepper import Stepper, StepperSettings
 
 
 @torch.no_grad()
-def chained_test(model, dm, logger=None, step: int = 0, settings=None) -> dict[str, Any]:
+def chained_test(model, dm, settings=None) -> dict[str, Any]:
     """Test ``model`` on ``dm``'s test windows through the stepper; returns what the Lightning
     test step leaves in ``model.test_results`` (collected arrays and ``metrics``)."""
     model = model.eval()
@@ -33,9 +33,5 @@ def chained_test(model, dm, logger=None, step: int = 0, settings=None) -> dict[s
             raise FloatingPointError(f"chained test: {stepper.stopped}")
         model.record(batch, torch.from_numpy(predicted), math.nan, "test")
     results = model.results("test")
-    if logger is not None:
-        logger.log_metrics(
-            {k: v for k, v in results["metrics"].items() if not math.isnan(v)}, step=step
-        )
     results["chained"] = {"model_horizon": int(model.hparams.horizon), **settings.to_dict()}
     return results

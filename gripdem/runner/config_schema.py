@@ -18,7 +18,7 @@ from enum import Enum
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING, DictConfig
+from omegaconf import MISSING, DictConfig, OmegaConf
 
 log = logging.getLogger(__name__)
 
@@ -192,6 +192,16 @@ class OutputsSchema:
 
 
 @dataclass
+class LoggerSchema:
+    """TensorBoard logger (conf/logger/tensorboard.yaml): event files in ``save_dir`` (the
+    run's folder, so that TensorBoard names the run by it)."""
+
+    save_dir: str = MISSING
+    name: str = ""
+    version: str = ""
+
+
+@dataclass
 class ConfigSchema:
     scene: Any = MISSING
     preset: Any = MISSING
@@ -200,7 +210,7 @@ class ConfigSchema:
     model: ModelSchema = field(default_factory=ModelSchema)
     baselines: BaselinesSchema = field(default_factory=BaselinesSchema)
     trainer: dict[str, Any] = field(default_factory=dict)
-    logger: dict[str, Any] = field(default_factory=dict)
+    logger: LoggerSchema = field(default_factory=LoggerSchema)
     callbacks: Any = None
     seed: int = 0
     torch_threads: Optional[int] = None
@@ -212,8 +222,12 @@ class ConfigSchema:
 
 
 def register() -> None:
-    """Make ``config_schema`` known to Hydra (idempotent)."""
+    """Make ``config_schema`` known to Hydra and the sweep's job-name resolver to OmegaConf
+    (idempotent)."""
+    from gripdem.runner.run_names import register_resolver
+
     ConfigStore.instance().store(name="config_schema", node=ConfigSchema)
+    register_resolver()
 
 
 def check_combination(cfg: DictConfig, notes: bool = True) -> None:
@@ -272,6 +286,45 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
         )
     if cfg.data.protocol == Protocol.paper:
         log.warning("data.protocol=paper is IN-SAMPLE (train = test): report it as such")
+    _check_split_fits_the_preset(cfg)
+    from gripdem.runner.tensorboard_log import check_logger_options
+
+    check_logger_options(cfg.get("logger") or {})
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
+
+
+def _choices(cfg: DictConfig) -> dict[str, str]:
+    """Hydra's chosen config files (``{"preset": "tiny", "experiment": "smoke", ...}``): from
+    the config's own ``hydra`` node, else from the running job (empty outside Hydra)."""
+    node = OmegaConf.select(cfg, "hydra.runtime.choices", default=None)
+    if node is not None:
+        return {str(k): str(v) for k, v in node.items()}
+    from hydra.core.hydra_config import HydraConfig
+
+    if HydraConfig.initialized():
+        return {str(k): str(v) for k, v in HydraConfig.get().runtime.choices.items()}
+    return {}
+
+
+def _check_split_fits_the_preset(cfg: DictConfig) -> None:
+    """The built-in dataset's simulations hold the split's h+1+f frames: a split given on the
+    command line with a preset's smaller scene (``experiment=smoke`` chooses ``preset=tiny``)
+    is refused here, naming both, before any data is generated."""
+    if cfg.data.get("path") is not None or "frames" not in cfg.preset:
+        return
+    needed = int(cfg.split.history) + 1 + int(cfg.split.horizon)
+    frames = int(cfg.preset.frames)
+    if needed <= frames:
+        return
+    choices = _choices(cfg)
+    preset = f"preset={choices.get('preset', cfg.preset.get('name'))}"
+    experiment = choices.get("experiment")
+    if experiment:
+        preset += f" (the size experiment={experiment} runs at)"
+    raise ValueError(
+        f"split={cfg.split.name} needs simulations of {needed} frames (h+1+f) but {preset} "
+        f"writes {frames} per simulation: give preset=default, or a split of at most "
+        f"{frames} frames (e.g. split=10-5)"
+    )

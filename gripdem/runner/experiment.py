@@ -4,7 +4,8 @@
 one output directory. Everything it writes goes under that directory (Hydra does not change
 the working directory):
 
-    tensorboard/        event files: scalars, HParams (hp/ metrics), figures as images
+    events.out.tfevents.*  TensorBoard: scalars, HParams (hp/ metrics), figures as images; the
+                        folder is the run (gripdem.runner.tensorboard_log), hparams.yaml beside
     checkpoints/        best.ckpt (lowest val/rmse), last.ckpt, best.safetensors (shareable)
     predictions.h5      test windows: prediction, truth, baselines (gripdem.evaluation.predictions)
     figures/*.png       the paper's figures (gripdem.plots.run)
@@ -24,7 +25,6 @@ from typing import Any
 import lightning as L
 import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
-from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig
 
 from gripdem.data.datamodule import TrajectoryDataModule
@@ -39,7 +39,7 @@ from gripdem.inference.checkpoint import (
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
-from gripdem.runner.atomic_files import AtomicCheckpointIO, AtomicTensorBoardLogger
+from gripdem.runner.atomic_files import AtomicCheckpointIO
 from gripdem.runner.chained_test import chained_test
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import lightning_info_muted, quiet_console
@@ -53,10 +53,15 @@ from gripdem.runner.finetune import (
 from gripdem.runner.outputs import physics_metrics, plain, to_predictions, write_outputs
 from gripdem.runner.progress import StepBudgetBar
 from gripdem.runner.resume import ResumeCheckpoint, resumed_seconds
+from gripdem.runner.tensorboard_log import (
+    RunLogger,
+    horizon_curves,
+    hp_metrics,
+    run_hparams,
+    test_scalars,
+)
 
 log = logging.getLogger(__name__)
-
-HP_METRICS = ("hp/val_rmse_best", "hp/test_rmse", "hp/test_rmse_cv_baseline")
 
 
 def resolve_data_path(cfg: DictConfig) -> Path:
@@ -136,7 +141,8 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
 
 
 def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
-    """Flat scalar hyperparameters for TensorBoard's HParams tab."""
+    """The run's settings as its model card and predictions file record them (TensorBoard's
+    HParams: :func:`gripdem.runner.tensorboard_log.run_hparams`)."""
     summary = dm.summary()
     model = plain(cfg.model)
     return {
@@ -167,7 +173,7 @@ def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
     }
 
 
-def build_trainer(cfg: DictConfig, out_dir: Path, logger: TensorBoardLogger) -> L.Trainer:
+def build_trainer(cfg: DictConfig, out_dir: Path, logger: RunLogger) -> L.Trainer:
     callbacks_cfg = plain(cfg.callbacks) or {}
     ckpt = callbacks_cfg.get("checkpoint", {})
     callbacks = [
@@ -246,11 +252,12 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
     return "\n".join(rows)
 
 
-def test_model(model, dm: TrajectoryDataModule, test_trainer, logger, step: int) -> dict:
+def test_model(model, dm: TrajectoryDataModule, test_trainer) -> dict:
     """The test windows: chained with the stepper when the model's horizon is shorter than the
-    split's (the surrogate path), else Lightning's test step; what ``model.test_results`` holds."""
+    split's (the surrogate path), else Lightning's test step; what ``model.test_results`` holds
+    (nothing logged: the runner logs the test at the last optimiser step)."""
     if dm.model_horizon < dm.split.horizon:
-        return chained_test(model, dm, logger, step)
+        return chained_test(model, dm)
     test_trainer.test(model, dm, verbose=False)
     return model.test_results
 
@@ -279,9 +286,9 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         checkpoint_cfg = (plain(cfg.callbacks) or {}).get("checkpoint", {})
         monitor = checkpoint_cfg.get("monitor", "val/rmse")  # the score training must beat
         start = validate_start(model, dm, accelerator(cfg), monitor)
-    logger = AtomicTensorBoardLogger(**plain(cfg.logger))
+    logger = RunLogger(**plain(cfg.logger))
     hp = hparams(cfg, dm)
-    logger.log_hyperparams(hp, metrics={key: math.nan for key in HP_METRICS})
+    logger.log_run_hparams(run_hparams(cfg, dm.in_sample))
     trainer = build_trainer(cfg, out_dir, logger)
     resume = out_dir / "checkpoints" / "last.ckpt"
     ckpt_path = str(resume) if cfg.resume and resume.exists() else None
@@ -299,7 +306,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         test_trainer = L.Trainer(
             accelerator=accelerator(cfg),
             devices=1,
-            logger=logger,
+            logger=False,  # the test is logged below, at the fit's last step
             enable_progress_bar=False,
             enable_checkpointing=False,
         )
@@ -310,16 +317,16 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     if source is not None:  # fine-tuning never returns a model worse than its start
         kept = keep_start_unless_beaten(model, start, best_score)
         if kept[1]:  # what training reached, for the record, before the start replaces it
-            trained_metrics = test_model(model, dm, test_trainer, None, 0)["metrics"]
+            trained_metrics = test_model(model, dm, test_trainer)["metrics"]
             best, best_score = f"{cfg.model.init_from} (the starting model)", start.val_rmse
         model, kept_start = kept
-    results = test_model(model, dm, test_trainer, logger, trainer.global_step)
+    results = test_model(model, dm, test_trainer)
     metrics = dict(results["metrics"])
     if trained_metrics is not None:
         metrics["finetune/trained_test_rmse"] = trained_metrics["test/rmse"]
     if source is not None:  # the source model as it was, on the same test windows
         as_is = load_model(cfg.model.init_from, dm.meta)  # its own AR prior, the data's scene
-        before = test_model(as_is, dm, test_trainer, None, 0)
+        before = test_model(as_is, dm, test_trainer)
         metrics.update({f"before/{k}": v for k, v in before["metrics"].items()})
         metrics[f"finetune/start_{start.monitor.replace('/', '_')}"] = start.val_rmse
         metrics["finetune/kept_start"] = float(kept_start)
@@ -328,25 +335,19 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     trained = trainer.lightning_module
     metrics["epochs"] = trainer.current_epoch
     metrics["steps"] = trainer.global_step
-    hp_values = {
-        "hp/val_rmse_best": metrics["val/rmse_best"],
-        "hp/test_rmse": metrics["test/rmse"],
-        "hp/test_rmse_cv_baseline": metrics["test/rmse_constant_velocity"],
-    }
-    metrics.update(hp_values)
     model_file = out_dir / "checkpoints" / "best.safetensors"  # its card: data and split plan
     export_run_model(model, model_file, hp, metrics, dm.meta, dm.summary())
     predictions = to_predictions(results, dm, hp)
     physics, physics_report = physics_metrics(predictions)
     metrics.update(physics)
-    logger.log_metrics(
-        {
-            k: v
-            for k, v in metrics.items()
-            if k.startswith(("hp/", "test/physics/", "test/crossers/"))
-        },
-        step=trainer.global_step,
-    )
+    # TensorBoard: the test and the hp/ metrics at the fit's last step (the axis of the
+    # validation curves), the error per horizon step as one curve per forecaster
+    diameter = dm.meta.diameter
+    parameters = sum(p.numel() for p in model.parameters() if p.requires_grad)
+    metrics.update(hp_metrics(metrics, diameter, parameters, trainer.global_step))
+    hp_values = {k: v for k, v in metrics.items() if k.startswith("hp/")}
+    logger.log_metrics({**test_scalars(metrics, diameter), **hp_values}, trainer.global_step)
+    logger.log_curves(horizon_curves(results.get("scores")))
     report = {
         **metrics,
         # time to accuracy: (training seconds, optimiser step, validation RMSE / CV's) at each
@@ -367,7 +368,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     report["data_seconds"] = data_seconds
     report["run_seconds"] = time.perf_counter() - run_started
     atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
-    logger.finalize("success")
+    logger.finish()
     title = f"{cfg.scene.name} / {cfg.split.name} / {cfg.model.name} (seed {cfg.seed})"
     print(f"\n== gripdem result: {title} ==")
     print(result_table(metrics, dm.meta.diameter, dm.in_sample))

@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -82,6 +83,14 @@ def _set_parent_death_signal() -> None:  # pragma: no cover - runs in the child 
     _parent_death_signal(signal.SIGTERM)
 
 
+def quoted(value: str) -> str:
+    """A string as one value of Hydra's override grammar (quoted: ``=`` and ``,`` kept)."""
+    # Hydra's rule: backslashes before a quote (the closing one too) are doubled
+    escaped = re.sub(r"(\\*)'", lambda m: m.group(1) * 2 + "\\'", value)
+    escaped = re.sub(r"(\\+)$", lambda m: m.group(1) * 2, escaped)
+    return f"'{escaped}'"
+
+
 def _job_dir(config: DictConfig) -> Path:
     return Path(str(config.hydra.sweep.dir)) / str(config.hydra.sweep.subdir)
 
@@ -117,10 +126,11 @@ class _Job:
         command = [
             *(sys.executable, "-m", "gripdem.run"),
             *self.overrides,
-            f"hydra.run.dir={self.dir}",
+            f"hydra.run.dir={quoted(str(self.dir))}",  # a job's name holds = and ,
             # a single run, whatever the overrides select (hparams_search=optuna sets
             # hydra.mode=MULTIRUN: without this each trial would start a study of its own)
             "hydra.mode=RUN",
+            f"hydra.job.num={self.number}",  # the sweep's order (the summary's rows)
         ]
         # torch's default thread count follows OMP_NUM_THREADS (torch_threads=N, when given
         # among the job's overrides, sets it again); the job's overrides stay as the user's

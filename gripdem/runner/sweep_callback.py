@@ -22,6 +22,16 @@ from gripdem.runner.console import report_error
 log = logging.getLogger(__name__)
 
 
+def tensorboard_hint(sweep_dir: Path) -> str:
+    """The command that shows this sweep's runs beside the sweeps next to it: TensorBoard on
+    the folder above, so that each run is named ``<sweep>/<swept values>``."""
+    parent = sweep_dir.parent if sweep_dir.parent != Path("") else Path(".")
+    return (
+        f"compare the runs: tensorboard --logdir {parent} (this sweep's runs: "
+        f"{sweep_dir.name}/...; open http://localhost:6006)"
+    )
+
+
 class SweepJobsFailed(ValueError):
     """Some jobs of a multirun failed (the others' results and the summary are complete)."""
 
@@ -36,7 +46,7 @@ class SweepSummary(Callback):
             return
         print(markdown)
         print(f"sweep summary: {md} and {csv_path}")
-        print(f"compare the runs: tensorboard --logdir {sweep_dir}")
+        print(tensorboard_hint(sweep_dir))
         failed = [job for job in collect(sweep_dir) if job.error is not None]
         if failed:
             named = "; ".join(

@@ -6,8 +6,8 @@ A job is a folder under ``SWEEP_DIR`` holding Hydra's ``.hydra/`` record; its me
 :mod:`gripdem.runner.run_names`), the overrides whose values differ between jobs (every
 override for a single job; from ``.hydra/overrides.yaml``, or the flattened
 ``.hydra/config.yaml`` when a job has no overrides file), then the key metrics, chosen by glob
-patterns (:data:`DEFAULT_METRICS`, per-step RMSEs left out). A job without ``metrics.json`` (failed or still running) keeps its row
-with status ``no metrics.json``.
+patterns (:data:`DEFAULT_METRICS`, per-step RMSEs left out). A job without ``metrics.json``
+(failed or still running) keeps its row with status ``no metrics.json``.
 
 When jobs differ by ``seed``, a second table groups the jobs that differ only by seed and gives
 ``mean ± std`` (sample standard deviation) of every metric over the seeds, with the number of

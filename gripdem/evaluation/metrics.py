@@ -117,7 +117,7 @@ def summarize(
 def shown_in_tensorboard(key: str) -> bool:
     """Whether a validation/test metric (``stage/name``) goes to TensorBoard: values in
     diameters and ratios, the loss and the ensemble's calibration; never one tag per step of
-    the horizon (``rmse_step/001``: those are one curve, ``horizon/...``) or metres."""
+    the horizon (``rmse_step/001``: those are one curve per forecaster) or metres."""
     name = key.split("/", 1)[-1]
     if "/" in name:
         return False

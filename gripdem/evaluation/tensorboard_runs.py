@@ -24,6 +24,8 @@ class RunView:
     scalars: dict[str, list[tuple[int, float]]] = field(default_factory=dict)
     #: ``{hparam: value}``, each value of its protobuf kind (bool, float or str)
     hparams: dict[str, Any] = field(default_factory=dict)
+    #: the HParams row's name (its Trial ID; empty: the run's name)
+    trial: str = ""
     #: whether the run carries an HParams experiment summary (columns fixed by one run)
     has_experiment_tag: bool = False
     images: list[str] = field(default_factory=list)
@@ -57,6 +59,7 @@ def read_runs(logdir: str | os.PathLike) -> dict[str, RunView]:
                 content[hparams_metadata.SESSION_START_INFO_TAG]
             )
             view.hparams = {k: _value(v) for k, v in start.hparams.items()}
+            view.trial = start.group_name
         view.images = list(tags.get("images", []))
         runs[name] = view
     return runs
@@ -80,7 +83,8 @@ def describe(runs: dict[str, RunView]) -> str:
         single = sum(1 for points in view.scalars.values() if len(points) == 1)
         lines.append(
             f"- run {name!r}: {len(view.scalars)} scalar tags ({single} with one point), "
-            f"{len(view.images)} image tags, experiment tag: {view.has_experiment_tag}"
+            f"{len(view.images)} image tags, HParams row {view.trial or name!r}, "
+            f"experiment tag: {view.has_experiment_tag}"
         )
         typed = ", ".join(f"{k}: {type(v).__name__}={v!r}" for k, v in view.hparams.items())
         lines.append(f"  hparams: {typed}")

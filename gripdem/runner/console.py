@@ -296,6 +296,20 @@ def report_error(exc: BaseException) -> None:
     print(f"error: {one_line(exc)}{hint}", file=sys.stderr, flush=True)
 
 
+def in_multirun() -> bool:
+    """Whether this Hydra job runs in-process in a multirun (Hydra's own launchers)."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+
+
+def in_sweep_job() -> bool:
+    """Whether this job is one of a sweep's: in a multirun, or a job of the parallel
+    launcher (its own process, :data:`SWEEP_JOB_ENV` set)."""
+    return in_multirun() or bool(os.environ.get(SWEEP_JOB_ENV))
+
+
 @contextmanager
 def single_run_errors(out_dir: Path | None = None) -> Iterator[None]:
     """Around the work of a Hydra job: in a single run a user error prints its line and exits
@@ -309,11 +323,8 @@ def single_run_errors(out_dir: Path | None = None) -> Iterator[None]:
     try:
         yield
     except _user_error_types() as exc:
-        from hydra.core.hydra_config import HydraConfig
-        from hydra.types import RunMode
-
-        multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
-        sweep_job = multirun or bool(os.environ.get(SWEEP_JOB_ENV))
+        multirun = in_multirun()
+        sweep_job = in_sweep_job()
         if multirun and out_dir is None:
             raise
         report_error(exc)

@@ -59,6 +59,7 @@ from gripdem.runner.tensorboard_log import (
     hp_metrics,
     run_hparams,
     test_scalars,
+    trial_name,
 )
 
 log = logging.getLogger(__name__)
@@ -288,7 +289,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         start = validate_start(model, dm, accelerator(cfg), monitor)
     logger = RunLogger(**plain(cfg.logger))
     hp = hparams(cfg, dm)
-    logger.log_run_hparams(run_hparams(cfg, dm.in_sample))
+    logger.log_run_hparams(run_hparams(cfg, dm.in_sample), trial_name(out_dir))
     trainer = build_trainer(cfg, out_dir, logger)
     resume = out_dir / "checkpoints" / "last.ckpt"
     ckpt_path = str(resume) if cfg.resume and resume.exists() else None

@@ -47,11 +47,12 @@ class SweepSummary(Callback):
         print(markdown)
         print(f"sweep summary: {md} and {csv_path}")
         print(tensorboard_hint(sweep_dir))
-        failed = [job for job in collect(sweep_dir) if job.error is not None]
+        # a job failed: its error line (error.txt), or no metrics.json (it crashed)
+        failed = [job for job in collect(sweep_dir) if job.status != "ok"]
         if failed:
             named = "; ".join(
                 f"job {job.name} ({' '.join(f'{k}={v}' for k, v in job.params.items())}): "
-                f"{job.error}"
+                f"{job.error or 'no metrics.json (see its console.log or run.log)'}"
                 for job in failed
             )
             # Hydra turns a callback's exception into a warning: end the command here

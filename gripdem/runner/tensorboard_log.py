@@ -15,8 +15,8 @@
   the two ratios, the overlap and the training seconds (the scatter view: error against time).
 - **Scalars**: per validation the loss, RMSE / d, the ratios to every baseline and CRPS / d; at
   the last optimiser step the test's (:func:`test_scalars`); the error per step of the horizon
-  as one curve per forecaster (``horizon/...``, x = the step of the horizon). No tag per horizon
-  step, no ``epoch`` (the budget is in steps), nothing in metres.
+  as one curve per forecaster (``test_per_horizon_step/...``, x = the step of the horizon).
+  No tag per horizon step, no ``epoch`` (the budget is in steps), nothing in metres.
 - **Custom scalars**: one layout grouping loss, validation RMSE / d and the ratios, and the
   error per horizon step beside the baselines (:data:`LAYOUT`).
 """
@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from lightning.fabric.utilities.logger import _convert_params
@@ -186,15 +187,20 @@ def test_scalars(metrics: Mapping[str, Any], diameter: float) -> dict[str, float
     return {k: v for k, v in out.items() if math.isfinite(v)}
 
 
+#: the tag group of the curves per horizon step (its name sorts after ``hp/``: TensorBoard's
+#: HParams tab shows the first five metric tags by name, and those are the hp/ ones)
+HORIZON_GROUP = "test_per_horizon_step"
+
+
 def horizon_curves(scores: Mapping[str, Any] | None) -> dict[str, list[float]]:
     """``{tag: values per horizon step}`` from the test's score curves: RMSE / d and CRPS / d
     of the model and every baseline, the ensemble's spread/skill."""
     curves: dict[str, list[float]] = {}
     for kind in ("rmse_over_d", "crps_over_d"):
         for forecaster, values in (scores or {}).get(kind, {}).items():
-            curves[f"horizon/{kind}/{forecaster}"] = list(values)
+            curves[f"{HORIZON_GROUP}/{kind}/{forecaster}"] = list(values)
     if scores and scores.get("spread_skill"):
-        curves["horizon/spread_skill/model"] = list(scores["spread_skill"])
+        curves[f"{HORIZON_GROUP}/spread_skill/model"] = list(scores["spread_skill"])
     return curves
 
 
@@ -207,8 +213,8 @@ LAYOUT = {
     },
     "test": {
         "test RMSE / baseline's": ["Multiline", [r"^test/rmse_ratio_", r"^hp/ratio_"]],
-        "RMSE / d per step of the horizon": ["Multiline", [r"^horizon/rmse_over_d/"]],
-        "CRPS / d per step of the horizon": ["Multiline", [r"^horizon/crps_over_d/"]],
+        "RMSE / d per step of the horizon": ["Multiline", [r"^test_per_horizon_step/rmse_"]],
+        "CRPS / d per step of the horizon": ["Multiline", [r"^test_per_horizon_step/crps_"]],
     },
 }
 
@@ -232,14 +238,23 @@ def check_logger_options(options: Mapping[str, Any]) -> None:
         )
 
 
-def session_start(hparams: Mapping[str, bool | float | str]):
+def trial_name(out_dir: Path) -> str:
+    """The HParams row's name (its *Trial ID*) of a sweep's job: what differs first, then the
+    sweep (``split=190-10 @ 07-29-23``), so that TensorBoard's narrow column shows the part
+    that tells rows apart. Empty for a single run: the row is then named by the run."""
+    from gripdem.runner.console import in_sweep_job
+
+    return f"{out_dir.name} @ {out_dir.parent.name}" if in_sweep_job() else ""
+
+
+def session_start(hparams: Mapping[str, bool | float | str], trial: str = ""):
     """TensorBoard's HParams session record (``_hparams_/session_start_info``) as a Summary,
-    each value of its own type (torch's writer turns booleans into numbers). Its group is the
-    run itself (no group name): runs with equal settings stay separate rows."""
+    each value of its own type (torch's writer turns booleans into numbers). ``trial`` names
+    its row (:func:`trial_name`; one run per name: distinct runs never share a row)."""
     from tensorboard.compat.proto.summary_pb2 import Summary
     from tensorboard.plugins.hparams import metadata, plugin_data_pb2
 
-    info = plugin_data_pb2.SessionStartInfo(start_time_secs=time.time())
+    info = plugin_data_pb2.SessionStartInfo(start_time_secs=time.time(), group_name=trial)
     for key, value in hparams.items():
         if isinstance(value, bool):
             info.hparams[key].bool_value = value
@@ -278,11 +293,11 @@ class RunLogger(AtomicTensorBoardLogger):
     step budget: the epoch is a number nobody compares) and the custom-scalars layout."""
 
     @rank_zero_only
-    def log_run_hparams(self, hparams: Mapping[str, bool | float | str]) -> None:
+    def log_run_hparams(self, hparams: Mapping[str, bool | float | str], trial: str = "") -> None:
         """Record the run's settings (HParams session and ``hparams.yaml``) and the layout."""
         self.hparams.update(dict(hparams))
         writer = self.experiment
-        writer.file_writer.add_summary(session_start(hparams))
+        writer.file_writer.add_summary(session_start(hparams, trial))
         writer.add_custom_scalars(LAYOUT)
 
     @rank_zero_only

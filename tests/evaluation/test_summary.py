@@ -159,3 +159,27 @@ def test_jobs_that_differ_only_by_seed_are_grouped_with_mean_and_std(tmp_path):
 def test_no_seed_table_without_seeds(sweep):
     _, _, markdown = write_summary(sweep)
     assert "over seeds" not in markdown and not (sweep / "summary_seeds.csv").exists()
+
+
+def test_a_sweep_with_a_crashed_job_ends_with_status_1_naming_it(sweep, capsys):
+    """A job that crashed before writing its error line (no metrics.json, no error.txt) fails
+    the sweep too: its summary row says so and the command ends with status 1."""
+    from omegaconf import OmegaConf
+
+    from gripdem.runner.sweep_callback import SweepSummary
+
+    config = OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}})
+    with pytest.raises(SystemExit) as ended:
+        SweepSummary().on_multirun_end(config)
+    assert ended.value.code == 1
+    err = capsys.readouterr().err
+    assert "1 job(s) of the sweep failed: job 2 (split=190-10 model=pct scene=lebc)" in err
+    assert "no metrics.json" in err
+
+
+def test_jobs_named_by_what_differs_keep_the_sweeps_order(tmp_path):
+    root = tmp_path / "sweep"
+    for number, name in enumerate(["split=190-10", "split=100-100", "split=150-50"]):
+        job = make_job(root, name, [name], metrics_of(1e-8, 2e-8, 1.0))
+        (job / ".hydra" / "hydra.yaml").write_text(f"hydra:\n  job:\n    num: {number}\n")
+    assert [j.name for j in collect(root)] == ["split=190-10", "split=100-100", "split=150-50"]

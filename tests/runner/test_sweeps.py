@@ -30,12 +30,13 @@ def run_cli(args: list[str], data_root: Path, timeout: int = 900) -> subprocess.
 def test_multirun_of_two_jobs_writes_a_summary(tmp_path, gripdem_data_root, tiny_pbc_path):
     sweep = tmp_path / "sweep"
     run_cli(["-m", "model=grip,pct", f"hydra.sweep.dir={sweep}"], gripdem_data_root)
-    for job in ("0", "1"):
-        metrics = json.loads((sweep / job / "metrics.json").read_text())
-        assert metrics["hparams"]["model"] == ("grip" if job == "0" else "pct")
-        assert list((sweep / job / "tensorboard").glob("events.out.tfevents*"))
+    for model in ("grip", "pct"):  # each job's folder is named by the swept value
+        metrics = json.loads((sweep / f"model={model}" / "metrics.json").read_text())
+        assert metrics["hparams"]["model"] == model
+        assert list((sweep / f"model={model}").glob("events.out.tfevents*"))
     summary = (sweep / "summary.md").read_text().splitlines()
     assert summary[0].startswith("| job | model |") and len(summary) == 4
+    assert summary[2].startswith("| model=grip |")  # the sweep's order
     assert (sweep / "summary.csv").exists()
 
 

@@ -4,6 +4,7 @@ on the folder above the sweep shows it."""
 
 import math
 import os
+import re
 import subprocess
 import sys
 
@@ -57,6 +58,8 @@ def test_runs_are_named_by_the_sweep_and_what_differs(sweep):
         "12-00-00/split.horizon=20,job=2",
         "12-00-00/split.horizon=5",
     ]
+    for name, run in runs.items():  # the HParams row: what differs first, then the sweep
+        assert run.trial == f"{name.split('/')[1]} @ 12-00-00"
     summary = (root / "12-00-00" / "summary.md").read_text()
     for name in runs:  # the summary's rows are the same folders, in the sweep's order
         assert f"| {name.split('/')[1]} |" in summary
@@ -87,8 +90,9 @@ def test_hp_metrics_are_ratios_diameters_and_time(sweep):
         assert 0 <= last["hp/overlap_last_frame"] <= 1
         assert last["hp/seconds_training"] > 0 and last["hp/steps_per_second"] > 0
         assert last["hp/trainable_parameters"] > 1000
-        # TensorBoard shows the first five metric columns, by name: error, ratios, overlap, time
-        assert sorted(hp)[:5] == [
+        # TensorBoard's metric columns are every scalar tag, sorted; it shows the first five:
+        # the error, the two ratios, the overlap and the training time
+        assert sorted(run.scalars)[:5] == [
             "hp/overlap_last_frame",
             "hp/ratio_ar",
             "hp/ratio_cv",
@@ -103,10 +107,9 @@ def test_scalars_are_few_comparable_and_on_one_axis(sweep):
     assert tags[0] == tags[1] == tags[2]  # horizons 5 and 20: the same tags
     scalars = runs[0].scalars
     assert len(scalars) < 60 and "epoch" not in scalars
-    assert not [t for t in scalars if "_step/" in t]  # no card per horizon step
-    horizon = {
-        run.hparams["split.horizon"]: run.scalars["horizon/rmse_over_d/model"] for run in runs
-    }
+    assert not [t for t in scalars if re.search(r"/\d+$", t)]  # no card per horizon step
+    tag = "test_per_horizon_step/rmse_over_d/model"
+    horizon = {run.hparams["split.horizon"]: run.scalars[tag] for run in runs}
     assert [s for s, _ in horizon[5.0]] == list(range(1, 6))  # x: the step of the horizon
     assert [s for s, _ in horizon[20.0]] == list(range(1, 21))
     for run in runs:

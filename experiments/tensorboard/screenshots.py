@@ -16,6 +16,7 @@ account the tests check (gripdem.evaluation.tensorboard_runs).
 from __future__ import annotations
 
 import argparse
+import re
 import shutil
 import socket
 import subprocess
@@ -26,7 +27,7 @@ from pathlib import Path
 
 from gripdem.evaluation.tensorboard_runs import describe, read_runs
 
-VIEWPORT = {"width": 1500, "height": 950}
+VIEWPORT = {"width": 1920, "height": 1000}
 
 
 def free_port() -> int:
@@ -101,16 +102,19 @@ def shoot(url: str, out: Path, differing: set[str], hparams: set[str]) -> list[P
         page.goto(f"{url}/#timeseries")
         page.wait_for_timeout(4000)
         page.get_by_role("button", name="Close side pane").click()
-        page.get_by_role("button", name="Scalars", exact=True).click()
-        tag_filter = page.get_by_placeholder("Filter tags (regex)")
-        tag_filter.fill(
-            r"^(train/loss|val/rmse_over_d|val/rmse_ratio_(constant_velocity|linear_ar))$"
-        )
-        page.wait_for_timeout(4000)
-        save("scalars")
-        tag_filter.fill(r"^test_per_horizon_step/rmse_over_d/")
-        page.wait_for_timeout(4000)
-        save("scalars_horizon")
+        page.locator("button", has_text=re.compile(r"^\s*Scalars\s*$")).first.click()
+        tag_filter = page.get_by_role("combobox", name="Filter tags (regex)")
+        for name, tags in (
+            (
+                "scalars",
+                r"^(train/loss|val/rmse_over_d|val/rmse_ratio_(constant_velocity|linear_ar))$",
+            ),
+            ("scalars_horizon", r"^test_per_horizon_step/rmse_over_d/"),
+        ):
+            tag_filter.fill(tags)
+            tag_filter.press("Escape")  # the suggestions list closed
+            page.wait_for_timeout(4000)
+            save(name)
         page.goto(f"{url}/#custom_scalars")
         page.wait_for_timeout(5000)
         save("custom_scalars")

@@ -208,7 +208,10 @@ def horizon_curves(scores: Mapping[str, Any] | None) -> dict[str, list[float]]:
 LAYOUT = {
     "training": {
         "loss (train and validation)": ["Multiline", [r"^train/loss$", r"^val/loss$"]],
-        "validation RMSE / d": ["Multiline", [r"^val/rmse_over_d$", r"^val/crps_over_d$"]],
+        "validation RMSE / d and CRPS / d": [
+            "Multiline",
+            [r"^val/rmse_over_d$", r"^val/crps_over_d$"],
+        ],
         "validation RMSE / baseline's": ["Multiline", [r"^val/rmse_ratio_"]],
     },
     "test": {

@@ -26,6 +26,46 @@ def test_names_say_what_the_sweep_varies():
     assert swept_keys(["model=vct"], None) == []
 
 
+def _job_config(sweep_dir, num, overrides, sweeper="BasicSweeper", params=None):
+    from omegaconf import OmegaConf
+
+    return OmegaConf.create(
+        {
+            "hydra": {
+                "job": {"num": num},
+                "overrides": {"task": overrides},
+                "sweeper": {"_target_": f"hydra.x.{sweeper}", "params": params},
+                "sweep": {"dir": str(sweep_dir)},
+                "runtime": {"choices": {"scene": "pbc", "split": "190-10", "model": "vct"}},
+            }
+        }
+    )
+
+
+def test_a_job_is_named_from_the_sweep_it_belongs_to(tmp_path):
+    from omegaconf import OmegaConf
+
+    from gripdem.runner.run_names import job_name
+
+    def sweep_of(*overrides):
+        OmegaConf.save(
+            {"hydra": {"overrides": {"task": list(overrides)}}}, tmp_path / "multirun.yaml"
+        )
+
+    sweep_of("split=190-10,100-100", "model=vct")
+    assert job_name(_job_config(tmp_path, 1, ["split=100-100", "model=vct"])) == "split=100-100"
+    sweep_of("seed=0,0,1")  # a value given twice: the job number keeps the folders apart
+    assert job_name(_job_config(tmp_path, 1, ["seed=0"])) == "seed=0,job=1"
+    assert job_name(_job_config(tmp_path, 2, ["seed=1"])) == "seed=1"
+    sweep_of("model=vct")  # one job: named by what it runs
+    assert job_name(_job_config(tmp_path, 0, ["model=vct"])) == "scene=pbc,split=190-10,model=vct"
+    optuna = _job_config(
+        tmp_path, 3, ["model.lr=0.00123456", "model.hidden=48"], "OptunaSweeper",
+        {"model.lr": "interval(1e-4, 1e-2)", "model.hidden": "choice(16, 32, 48)"},
+    )  # fmt: skip
+    assert job_name(optuna) == "trial=3,model.lr=0.001235,model.hidden=48"
+
+
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory, gripdem_data_root, tiny_pbc_path):
     """``-m split.horizon=5,20,20 model=vct experiment=smoke``: two horizons (the tag count

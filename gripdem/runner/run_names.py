@@ -14,8 +14,8 @@ ${gripdem.run_name:}``; the resolver reads the job's own overrides and the sweep
   (``trial=7,model.lr=0.00123``): trials are chosen as the sweep goes and may repeat;
 - a sweep of one job (no key swept): its scene, split and model.
 
-Values are written as given (floats with 4 significant digits); a ``/`` becomes ``.`` so that
-a name is one folder.
+Values are written as given (floats with 4 significant digits, a path by its file name); a
+``/`` in a key becomes ``.`` so that a name is one folder.
 """
 
 from __future__ import annotations
@@ -56,8 +56,8 @@ def swept_keys(task_overrides: list[str], sweeper_params: dict[str, Any] | None)
 def _format(value: str) -> str:
     try:
         number = float(value)
-    except ValueError:
-        return value.replace("/", ".")
+    except ValueError:  # a path: its file name (two alike get the job number)
+        return value.rstrip("/").rsplit("/", 1)[-1] or value.replace("/", ".")
     if value.strip().lstrip("+-").isdigit():
         return value.strip()
     return f"{number:.4g}"
@@ -68,7 +68,11 @@ def name_of(job_overrides: list[str], keys: list[str]) -> str:
     values = {}
     for override in _parser().parse_overrides(list(job_overrides)):
         values[override.get_key_element()] = override.get_value_element_as_str()
-    parts = [f"{key.replace('/', '.')}={_format(values[key])}" for key in keys if key in values]
+    parts = [
+        f"{key.lstrip('+~').replace('/', '.')}={_format(values[key])}"
+        for key in keys
+        if key in values
+    ]
     return ",".join(parts)
 
 

@@ -24,6 +24,8 @@ def test_names_say_what_the_sweep_varies():
     assert name_of(job, keys) == "split=100-100,model.lr=0.003,seed=1,data.batch_size=2"
     assert name_of(["model/encoder=graph_conv"], ["model/encoder"]) == "model.encoder=graph_conv"
     assert swept_keys(["model=vct"], None) == []
+    paths = swept_keys(["data.path=/a/mine.h5,/b/theirs.h5", "+note=a,b"], None)
+    assert name_of(["data.path=/b/theirs.h5", "+note=b"], paths) == "data.path=theirs.h5,note=b"
 
 
 def _job_config(sweep_dir, num, overrides, sweeper="BasicSweeper", params=None):

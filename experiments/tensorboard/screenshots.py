@@ -10,7 +10,8 @@ reader finds in LOGDIR (runs, HParams keys with types, hp/ metrics, tag counts),
 account the tests check (gripdem.evaluation.tensorboard_runs).
 
     python -m gripdem.run -m split=190-10,100-100 model=vct        # the mission's sweep
-    python experiments/tensorboard/screenshots.py multirun/<date> --out docs/assets
+    python experiments/tensorboard/screenshots.py multirun/<date>
+    cp experiments/figures/tensorboard_*.png docs/assets/   # the docs' copies
 """
 
 from __future__ import annotations
@@ -125,10 +126,20 @@ def shoot(url: str, out: Path, differing: set[str], hparams: set[str]) -> list[P
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("logdir", type=Path, help="the folder above one or more sweeps")
-    parser.add_argument("--out", type=Path, default=Path("docs/assets"))
+    parser.add_argument("--out", type=Path, default=Path("experiments/figures"))
     args = parser.parse_args(argv)
     runs = read_runs(args.logdir)
-    print(describe(runs))
+    account = describe(runs)
+    print(account)
+    import datetime
+
+    import tensorboard
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    (args.out / "tensorboard_runs.txt").write_text(
+        f"{stamp}, TensorBoard {tensorboard.__version__}, log folder {args.logdir}\n{account}\n"
+    )
     hparams = {key for run in runs.values() for key in run.hparams}
     differing = {
         key for key in hparams if len({repr(r.hparams.get(key)) for r in runs.values()}) > 1

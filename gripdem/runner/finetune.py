@@ -145,8 +145,10 @@ def validate_start(model, dm, accelerator: str = "cpu", monitor: str = "val/rmse
         enable_progress_bar=False,
         enable_model_summary=False,
     )
-    results = trainer.validate(model, dm, verbose=False)
-    score = float(results[0][monitor]) if results and monitor in results[0] else math.nan
+    trainer.validate(model, dm, verbose=False)
+    # every metric reaches the callbacks; the returned results hold only the logged ones
+    value = trainer.callback_metrics.get(monitor)
+    score = float(value) if value is not None else math.nan
     log.info("fine-tuning starts from %s %.6g (the model as it is)", monitor, score)
     return StartingPoint(copy.deepcopy(model), score, monitor)
 

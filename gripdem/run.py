@@ -23,10 +23,11 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
+from gripdem.config_files import config_dir
 from gripdem.runner.config_schema import register
 from gripdem.runner.console import run_hydra_command, single_run_errors
 
-CONFIG_DIR = str(Path(__file__).resolve().parent.parent / "conf")
+CONFIG_DIR = str(config_dir())  # gripdem/conf: the source tree's conf/, or a wheel's copy
 register()
 #: the output directory of the job running in this process (for the Ctrl-C line)
 _OUT_DIRS: list[Path] = []

@@ -22,6 +22,7 @@ from omegaconf import DictConfig
 
 # light imports only: the DEM (numba, torch) loads inside run_hydra_command (a Ctrl-C or
 # SIGTERM while it loads is answered in one line)
+from gripdem.config_files import config_dir
 from gripdem.runner.console import run_hydra_command, single_run_errors
 
 log = logging.getLogger(__name__)
@@ -85,7 +86,7 @@ def summary(report: dict) -> str:
     return "\n".join(lines)
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="simulate")
+@hydra.main(version_base="1.3", config_path=str(config_dir()), config_name="simulate")
 def main(cfg: DictConfig) -> None:
     with single_run_errors():
         run(cfg)

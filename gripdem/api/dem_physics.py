@@ -4,16 +4,16 @@ trajectory."""
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 from typing import Any
 
 from gripdem.api.scene import Trajectory
+from gripdem.config_files import config_dir
 
 #: validation checks that say whether data suits training, not whether the physics is sound: a
 #: warning here (a short single simulation may have no Lees-Edwards face crossing)
 ADVISORY_CHECKS = ("le_crossings_present",)
 #: the configuration folder (scenes: ``conf/scene/*.yaml``, sizes: ``conf/preset/*.yaml``)
-CONF_DIR = Path(__file__).resolve().parent.parent.parent / "conf"
+CONF_DIR = config_dir()
 
 
 def _group(group: str, name: str) -> dict[str, Any]:

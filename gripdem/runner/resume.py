@@ -199,4 +199,8 @@ class ResumeCheckpoint(Checkpoint):
         self._deferred = False
         if trainer.state.fn != "fit" or trainer.sanity_checking or trainer.fast_dev_run:
             return
-        trainer.save_checkpoint(self.path)  # the runner's CheckpointIO renames it into place
+        # the full state (optimiser, loops, callbacks) for an exact resume; it holds tensors and
+        # plain containers only, read back with weights_only=True. Saying so here also keeps
+        # Lightning from logging "`weights_only` was not set" at every save.
+        # The runner's CheckpointIO renames the file into place.
+        trainer.save_checkpoint(self.path, weights_only=False)

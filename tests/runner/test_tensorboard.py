@@ -102,6 +102,8 @@ def test_runs_are_named_by_the_sweep_and_what_differs(sweep):
     ]
     for name, run in runs.items():  # the HParams row: what differs first, then the sweep
         assert run.trial == f"{name.split('/')[1]} @ 12-00-00"
+    for log in (root / "12-00-00").glob("*/run.log"):  # every checkpoint is data, said so
+        assert "weights_only` was not set" not in log.read_text(), log
     summary = (root / "12-00-00" / "summary.md").read_text()
     for name in runs:  # the summary's rows are the same folders, in the sweep's order
         assert f"| {name.split('/')[1]} |" in summary

@@ -61,7 +61,7 @@ class TrajectoryDataModule(L.LightningDataModule):
     (``periodic`` | ``lees_edwards``), when given, must match the file's boundary.
     ``model_horizon`` (``model.horizon``): a model that predicts fewer frames than the split's
     horizon trains and validates on windows of its own horizon; the test windows keep the
-    split's, and the runner chains the model over them (:mod:`gripdem.runner.chained_test`).
+    split's, and the runner chains the model over them (:mod:`gripdem.runner.chained_evaluation`).
     ``seed`` (the run's seed; None: ``torch.initial_seed()``) orders the training windows: one
     permutation per ``(seed, epoch)``, resumable mid-epoch (:mod:`gripdem.data.resumable`).
     """

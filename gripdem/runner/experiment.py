@@ -40,7 +40,7 @@ from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
 from gripdem.runner.atomic_files import AtomicCheckpointIO
-from gripdem.runner.chained_test import chained_test
+from gripdem.runner.chained_evaluation import evaluate_chained
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import lightning_info_muted, quiet_console
 from gripdem.runner.finetune import (
@@ -258,7 +258,7 @@ def test_model(model, dm: TrajectoryDataModule, test_trainer) -> dict:
     split's (the surrogate path), else Lightning's test step; what ``model.test_results`` holds
     (nothing logged: the runner logs the test at the last optimiser step)."""
     if dm.model_horizon < dm.split.horizon:
-        return chained_test(model, dm)
+        return evaluate_chained(model, dm)
     test_trainer.test(model, dm, verbose=False)
     return model.test_results
 

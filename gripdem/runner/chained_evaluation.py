@@ -20,7 +20,7 @@ from gripdem.inference.stepper import Stepper, StepperSettings
 
 
 @torch.no_grad()
-def chained_test(model, dm, settings=None) -> dict[str, Any]:
+def evaluate_chained(model, dm, settings=None) -> dict[str, Any]:
     """Test ``model`` on ``dm``'s test windows through the stepper; returns what the Lightning
     test step leaves in ``model.test_results`` (collected arrays and ``metrics``)."""
     model = model.eval()

@@ -22,8 +22,9 @@ ENTRY_POINTS = {
     "physics_report",
     "summary",
 }
-#: the package version, one place (imported by the layers that stamp files with it)
-GROUND_MODULES = {"_version"}
+#: the package version, one place (imported by the layers that stamp files with it), and where
+#: the configuration files are (read by the entry points and the API)
+GROUND_MODULES = {"_version", "config_files"}
 LAYERS = {
     "api",  # the Python entry point: the stable names re-exported at ``gripdem``
     "boundary",

@@ -203,10 +203,13 @@ def test_corrupted_files_are_refused_with_the_field(tmp_path, le_file, moved):
 
 
 def test_no_unsafe_loading_anywhere_in_gripdem():
-    """Every checkpoint gripdem reads goes through the safe loader."""
+    """Every checkpoint gripdem reads goes through the safe loader (``weights_only=False``
+    only where a checkpoint is saved whole: Lightning's ``save_checkpoint``)."""
     for source in (ROOT / "gripdem").rglob("*.py"):
         text = source.read_text()
-        assert "weights_only=False" not in text, source
+        for line in text.splitlines():
+            if "weights_only=False" in line:
+                assert "save_checkpoint(" in line, f"{source}: {line.strip()}"
         assert "load_from_checkpoint" not in text, source
         assert not re.search(r"\bpickle\.loads?\(", text), source
 

@@ -200,3 +200,33 @@ def test_doc_figures_are_the_current_ones():
         assert asset.read_bytes() == sources[0].read_bytes(), (
             f"docs/assets/{asset.name} is stale: cp {sources[0].relative_to(ROOT)} docs/assets/"
         )
+
+
+def _readme_results():
+    import importlib.util
+
+    path = ROOT / "experiments" / "release" / "readme_results.py"
+    spec = importlib.util.spec_from_file_location("readme_results", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_readme_results_table_is_its_source_file():
+    """The README's results table is regenerated from experiments/results/decoder_modes.md by
+    experiments/release/readme_results.py; its --check fails, naming both, when they differ."""
+    proc = subprocess.run(
+        [sys.executable, "experiments/release/readme_results.py", "--check"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    script = _readme_results()
+    readme = (ROOT / "README.md").read_text()
+    table = script.readme_table(script.SOURCE.read_text())
+    stale = readme.replace(
+        "| pbc | 190-10 | grip (interaction) | 0.00242",
+        "| pbc | 190-10 | grip (interaction) | 0.00999",
+    )
+    assert stale != readme and script.replace_block(stale, table) == readme

@@ -287,25 +287,46 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
     if cfg.data.protocol == Protocol.paper:
         log.warning("data.protocol=paper is IN-SAMPLE (train = test): report it as such")
     _check_split_fits_the_preset(cfg)
-    from gripdem.runner.tensorboard_log import check_logger_options
-
-    check_logger_options(cfg.get("logger") or {})
+    _check_logger_options(cfg.get("logger") or {})
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
 
 
-def _choices(cfg: DictConfig) -> dict[str, str]:
+def hydra_choices(cfg: DictConfig) -> dict[str, str]:
     """Hydra's chosen config files (``{"preset": "tiny", "experiment": "smoke", ...}``): from
     the config's own ``hydra`` node, else from the running job (empty outside Hydra)."""
     node = OmegaConf.select(cfg, "hydra.runtime.choices", default=None)
-    if node is not None:
-        return {str(k): str(v) for k, v in node.items()}
-    from hydra.core.hydra_config import HydraConfig
+    if node is None:
+        from hydra.core.hydra_config import HydraConfig
 
-    if HydraConfig.initialized():
-        return {str(k): str(v) for k, v in HydraConfig.get().runtime.choices.items()}
-    return {}
+        if not HydraConfig.initialized():
+            return {}
+        node = HydraConfig.get().runtime.choices
+    return {str(k): str(v) for k, v in (node or {}).items() if v is not None}
+
+
+def _check_logger_options(options) -> None:
+    """Refuse a logger option that neither Lightning's TensorBoardLogger nor TensorBoard's
+    SummaryWriter takes (``+logger.flush_secs=5`` is one; a typo is not), in one line. The
+    schema's own keys need no look-up (and no import of Lightning before a sweep starts)."""
+    extra = set(options) - set(LoggerSchema.__dataclass_fields__)
+    if not extra:
+        return
+    import inspect
+
+    from lightning.pytorch.loggers import TensorBoardLogger
+    from torch.utils.tensorboard import SummaryWriter
+
+    allowed = set(LoggerSchema.__dataclass_fields__)
+    for function in (TensorBoardLogger.__init__, SummaryWriter.__init__):
+        allowed |= set(inspect.signature(function).parameters) - {"self", "kwargs", "args"}
+    unknown = sorted(extra - allowed)
+    if unknown:
+        raise ValueError(
+            f"logger.{unknown[0]}: not an option of the TensorBoard logger; allowed: "
+            f"{', '.join(sorted(allowed))}"
+        )
 
 
 def _check_split_fits_the_preset(cfg: DictConfig) -> None:
@@ -318,7 +339,7 @@ def _check_split_fits_the_preset(cfg: DictConfig) -> None:
     frames = int(cfg.preset.frames)
     if needed <= frames:
         return
-    choices = _choices(cfg)
+    choices = hydra_choices(cfg)
     preset = f"preset={choices.get('preset', cfg.preset.get('name'))}"
     experiment = choices.get("experiment")
     if experiment:

@@ -7,14 +7,15 @@ Hydra plugin class is ``hydra_plugins.gripdem_launcher.ParallelLauncher``, which
 sooner than the same jobs one after another with two threads, because a small model at batch
 size one keeps a second thread mostly idle.
 
-Each job is ``python -m gripdem.run <its overrides> hydra.run.dir=<sweep>/<job number>
-hydra.mode=RUN`` with ``OMP_NUM_THREADS=<threads>``: a single run in a fresh process, so its
-log, TensorBoard run, checkpoints and errors stay its own. What it prints goes to
-``<job folder>/console.log``; the sweep's console gets one line when a job starts and one
-when it ends (its time and error line). At most ``n_jobs`` run at once, and
-``n_jobs x threads`` never exceeds the CPUs given to this process (no oversubscription). A
-job that fails writes ``error.txt`` (the one error line), returns NaN to the sweeper, and
-leaves the other jobs running; the sweep's summary names it.
+Each job is ``python -m gripdem.run <its overrides> hydra.run.dir=<sweep>/<its name>
+hydra.mode=RUN hydra.job.num=<n>`` (its name: ``hydra.sweep.subdir``, what differs,
+:mod:`gripdem.runner.run_names`) with ``OMP_NUM_THREADS=<threads>``: a single run in a fresh
+process, so its log, TensorBoard run, checkpoints and errors stay its own. What it prints goes
+to ``<job folder>/console.log``; the sweep's console gets one line when a job starts and one
+when it ends (its time and error line). At most ``n_jobs`` run at once, and ``n_jobs x threads``
+never exceeds the CPUs given to this process (no oversubscription). A job that fails writes
+``error.txt`` (the one error line), returns NaN to the sweeper, and leaves the other jobs
+running; the sweep's summary names it.
 
 Stopping: Ctrl-C reaches every job (one process group) and each answers with its one
 ``interrupted:`` line in its console.log (a job still running 5 s later gets SIGTERM); SIGTERM

@@ -39,14 +39,14 @@ def _parser():
     return OverridesParser.create()
 
 
+def _parse(overrides: list[str]) -> list:
+    return _parser().parse_overrides(list(overrides))
+
+
 def swept_keys(task_overrides: list[str], sweeper_params: dict[str, Any] | None) -> list[str]:
     """Keys that take several values in a sweep, in command-line order: sweep overrides
     (``a=1,2``, ``range``, ``glob``, ``choice``) and every ``hydra.sweeper.params`` key."""
-    keys = [
-        o.get_key_element()
-        for o in _parser().parse_overrides(list(task_overrides))
-        if o.is_sweep_override()
-    ]
+    keys = [o.get_key_element() for o in _parse(task_overrides) if o.is_sweep_override()]
     for key in sweeper_params or {}:
         if key not in keys:
             keys.append(str(key))
@@ -63,10 +63,17 @@ def _format(value: str) -> str:
     return f"{number:.4g}"
 
 
+def override_keys(overrides: list[str]) -> list[str]:
+    """The keys that overrides set, as written (``model.lr``, ``model/encoder``; ``+``
+    dropped), deletions (``~key``) left out."""
+    parsed = _parse(overrides)
+    return [o.get_key_element().lstrip("+") for o in parsed if not o.is_delete()]
+
+
 def name_of(job_overrides: list[str], keys: list[str]) -> str:
     """``key=value`` of the swept ``keys`` among one job's overrides, joined by ``,``."""
     values = {}
-    for override in _parser().parse_overrides(list(job_overrides)):
+    for override in _parse(job_overrides):
         values[override.get_key_element()] = override.get_value_element_as_str()
     parts = [
         f"{key.lstrip('+~').replace('/', '.')}={_format(values[key])}"
@@ -105,21 +112,28 @@ def job_name(config: DictConfig) -> str:
         sweep_overrides = list(OmegaConf.to_container(sweep.hydra.overrides.task, resolve=False))
     keys = swept_keys(sweep_overrides, params)
     name = name_of(own, keys) or _default_name(config)
-    if len(name) > MAX_NAME or _repeated(name, keys, sweep_overrides, params):
+    if len(name) > MAX_NAME or _repeated(own, sweep_overrides, params):
         name = f"{name[:MAX_NAME]},job={number}"
     return name
 
 
-def _repeated(name: str, keys: list[str], sweep_overrides: list[str], params) -> bool:
-    """Whether another job of the basic sweep gets the same name (a value given twice)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-
+def _repeated(own: list[str], sweep_overrides: list[str], params) -> bool:
+    """Whether another job of the basic sweep gets the same name: the jobs are the product of
+    the swept keys' values, so two share every swept value exactly when one of this job's
+    values is listed twice for its key (``seed=0,0``)."""
+    values = {o.get_key_element(): o.get_value_element_as_str() for o in _parse(own)}
     arguments = [f"{k}={v}" for k, v in (params or {}).items()] + list(sweep_overrides)
-    try:
-        jobs = BasicSweeper.split_arguments(_parser().parse_overrides(arguments), None)[0]
-    except Exception:  # noqa: BLE001 - a glob needs Hydra's config loader: assume distinct
-        return False
-    return sum(1 for job in jobs if name_of(list(job), keys) == name) > 1
+    for override in _parse(arguments):
+        key = override.get_key_element()
+        if not override.is_sweep_override() or key not in values:
+            continue
+        try:
+            listed = list(override.sweep_string_iterator())
+        except Exception:  # noqa: BLE001 - a glob needs Hydra's config loader: distinct values
+            continue
+        if listed.count(values[key]) > 1:
+            return True
+    return False
 
 
 def _resolve(*, _root_: DictConfig) -> str:

@@ -35,6 +35,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from gripdem.evaluation.metrics import shown_in_tensorboard
 from gripdem.runner.atomic_files import AtomicTensorBoardLogger
+from gripdem.runner.config_schema import hydra_choices
+from gripdem.runner.run_names import override_keys
 
 #: settings that define a run, as command-line keys (a group's key holds its choice)
 RUN_SETTINGS = (
@@ -75,28 +77,13 @@ HP_METRICS = (
 )
 
 
-def _choices() -> dict[str, str]:
-    from hydra.core.hydra_config import HydraConfig
-
-    if not HydraConfig.initialized():
-        return {}
-    return {k: str(v) for k, v in (HydraConfig.get().runtime.choices or {}).items() if v}
-
-
 def _task_keys() -> list[str]:
-    """The keys of the job's command-line overrides (none outside Hydra)."""
+    """The keys of the job's command-line overrides (none outside Hydra; deletions left out)."""
     from hydra.core.hydra_config import HydraConfig
 
     if not HydraConfig.initialized():
         return []
-    keys = []
-    for override in HydraConfig.get().overrides.task:
-        override = str(override)
-        if override.startswith("~"):
-            continue
-        key = override.lstrip("+").split("=", 1)[0]
-        keys.append(key)
-    return keys
+    return override_keys(list(HydraConfig.get().overrides.task))
 
 
 def _typed(value: Any) -> bool | float | str | None:
@@ -117,7 +104,7 @@ def run_hparams(cfg: DictConfig, in_sample: bool) -> dict[str, bool | float | st
     """``{command-line key: typed value}``: the job's own override keys first (a sweep's keys
     among them), then :data:`RUN_SETTINGS`, then ``in_sample``. Scene, split, model, encoder
     and preset are recorded by the name of what ran, other groups by the chosen file."""
-    choices = _choices()
+    choices = hydra_choices(cfg)
     named = {  # what ran, by its own name (split.horizon=20 on split=10-5 runs 10-20)
         "scene": cfg.scene.get("name"),
         "split": cfg.split.get("name"),
@@ -220,25 +207,6 @@ LAYOUT = {
         "CRPS / d per step of the horizon": ["Multiline", [r"^test_per_horizon_step/crps_"]],
     },
 }
-
-
-def check_logger_options(options: Mapping[str, Any]) -> None:
-    """Refuse a logger option that neither Lightning's TensorBoardLogger nor TensorBoard's
-    SummaryWriter takes (``+logger.flush_secs=5`` is one; a typo is not), in one line."""
-    import inspect
-
-    from lightning.pytorch.loggers import TensorBoardLogger
-    from torch.utils.tensorboard import SummaryWriter
-
-    allowed = set()
-    for function in (TensorBoardLogger.__init__, SummaryWriter.__init__):
-        allowed |= set(inspect.signature(function).parameters) - {"self", "kwargs", "args"}
-    unknown = sorted(set(options) - allowed)
-    if unknown:
-        raise ValueError(
-            f"logger.{unknown[0]}: not an option of the TensorBoard logger; allowed: "
-            f"{', '.join(sorted(allowed))}"
-        )
 
 
 def trial_name(out_dir: Path) -> str:

@@ -1,5 +1,5 @@
-"""``python -m gripdem.claims SWEEP_DIR...``: the paper's claims (SPEC §7) tested over seeds as
-hypotheses, written to ``claims.md`` (:mod:`gripdem.evaluation.claims`)."""
+"""``python -m gripdem.claims SWEEP_DIR...``: the paper's claims (docs/spec/evaluation.md#claims)
+tested over seeds as hypotheses, written to ``claims.md`` (:mod:`gripdem.evaluation.claims`)."""
 
 from __future__ import annotations
 

@@ -47,7 +47,8 @@ COLORS = {
 def step_statistics(positions, times, p) -> tuple[np.ndarray, np.ndarray]:
     """Per step of a trajectory ``(frames, N, 3)``: the mean-flow strain it implies (slope of
     the z step against x at the step's middle; imposed: ``shear_rate * dt``) and the RMS step
-    length. Steps are LE minimum images with the later frame's offset (SPEC §2)."""
+    length. Steps are LE minimum images with the later frame's offset
+    (docs/spec/conventions.md#which-offset)."""
     offsets = p.boundary.offset(times)
     steps = displacement(positions[1:], positions[:-1], p.box, offsets[1:, None])
     x = positions[:-1, :, 0] + 0.5 * steps[..., 0]

@@ -7,7 +7,7 @@ flow, unwrap), ``codec`` (sin/cos), ``neighbours`` (the O(n) LE pair search) and
 (the same with a skin, followed over frames). All functions
 take numpy arrays or torch tensors with any leading batch shape and return the same kind.
 
-Conventions (SPEC §2):
+Conventions (docs/spec/conventions.md):
 - The box is centred at the origin; wrapped positions lie in ``[-l/2, l/2)`` per axis.
 - Lees-Edwards: gradient axis x, flow axis z. With ``sign=+1`` the mean flow is
   ``u_z = +shear_rate * x`` and the image cell across the +x face is displaced along z by
@@ -17,7 +17,7 @@ Conventions (SPEC §2):
 - ``offset`` arguments are LE offsets delta in length units, broadcastable to
   ``positions.shape[:-1]`` (e.g. shape ``(frames, 1)`` for positions ``(frames, particles, 3)``).
   For two positions of the same frame use that frame's offset; for a difference between
-  frames use the offset of the LATER frame (SPEC §2).
+  frames use the offset of the LATER frame (docs/spec/conventions.md#which-offset).
 - Offsets are computed in float64 from absolute times and wrapped before any cast to the
   positions' dtype, because ``shear_rate * lx * t`` grows without bound.
 """

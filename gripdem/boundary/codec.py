@@ -1,5 +1,5 @@
-"""The sin/cos position codec (SPEC §2): per axis with that axis's own length; decoding by
-atan2 (correct in all quadrants and for pairs off the unit circle)."""
+"""The sin/cos position codec (docs/spec/conventions.md#sincos): per axis with that axis's own
+length; decoding by atan2 (correct in all quadrants and for pairs off the unit circle)."""
 
 from __future__ import annotations
 

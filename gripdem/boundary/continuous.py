@@ -1,9 +1,10 @@
 """Lattice-continuous trajectories: frame-to-frame steps that stay smooth across the
 Lees-Edwards faces, the affine flow of the sheared cell, unwrapping and rewrapping.
 
-A particle that crosses an LE face keeps its lattice-continuous motion (SPEC §11): in these
-coordinates a constant step extrapolated from an anchor frame is the constant-velocity rollout,
-including the LE shift and the velocity jump of every crossing."""
+A particle that crosses an LE face keeps its lattice-continuous motion
+(docs/spec/conventions.md#lattice-continuous): in these coordinates a constant step extrapolated
+from an anchor frame is the constant-velocity rollout, including the LE shift and the velocity jump
+of every crossing."""
 
 from __future__ import annotations
 

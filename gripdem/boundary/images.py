@@ -3,7 +3,7 @@
 
 ``offset`` arguments are LE offsets delta in length units, broadcastable to
 ``positions.shape[:-1]``; for two positions of the same frame use that frame's offset, for a
-difference between frames the offset of the LATER frame (SPEC §2)."""
+difference between frames the offset of the LATER frame (docs/spec/conventions.md#which-offset)."""
 
 from __future__ import annotations
 

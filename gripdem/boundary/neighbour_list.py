@@ -4,7 +4,7 @@ Pairs within ``cutoff + skin`` are found once (:func:`gripdem.boundary.neighbour
 on the triclinic LE lattice) with the integer image shift ``n`` of every pair; later frames
 recompute each listed pair's vector from the current positions and offset, exactly, and keep the
 pairs within ``cutoff``. Nothing is searched again until a pair outside the list could have come
-within the cut-off (SPEC §9, as the DEM's list):
+within the cut-off (docs/spec/dem.md#numerical-traps, as the DEM's list):
 
     2 * max_i |D_i| + |strain since the build| * (cutoff + skin) >= skin  ->  rebuild
 

@@ -2,9 +2,10 @@
 
 ``vesin`` (cell lists) on the triclinic lattice of the Lees-Edwards images, cell vectors
 ``(lx, 0, delta), (0, ly, 0), (0, 0, lz)`` with delta of that frame (a periodic box is the case
-delta = 0): its neighbour set equals a brute-force LE minimum-image search exactly (SPEC §2).
-The graph of the models, the physics report, the rollout checks and the in-memory stepper all
-call :func:`neighbour_pairs`; :func:`brute_force_pairs` is the O(n²) reference for tests.
+delta = 0): its neighbour set equals a brute-force LE minimum-image search exactly
+(docs/spec/conventions.md#minimum-image). The graph of the models, the physics report, the rollout
+checks and the in-memory stepper all call :func:`neighbour_pairs`; :func:`brute_force_pairs` is the
+O(n²) reference for tests.
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ def neighbour_pairs(
     positions ``(N, 3)`` float64 wrapped; ``offset`` the frame's LE offset delta (0 if
     periodic). Returns int64 ``i``, ``j`` ``(P,)`` and the float64 minimum-image vectors
     ``r_j - r_i`` ``(P, 3)``. A cut-off of half the smallest box length or more (several
-    images of a pair could lie within it) keeps each pair once, with the SPEC's minimum image.
+    images of a pair could lie within it) keeps each pair once, with the minimum image of
+    docs/spec/conventions.md#minimum-image.
     """
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     if positions.ndim != 2 or positions.shape[1] != 3:
@@ -55,7 +57,8 @@ def neighbour_pairs(
     i, j = i.astype(np.int64), j.astype(np.int64)
     if 2 * cutoff >= min(box.lx, box.ly, box.lz):
         # More than one image of a pair (or a particle's own image) can lie within the
-        # cut-off: keep each pair once, with the SPEC's minimum image, if that is within it.
+        # cut-off: keep each pair once, with the minimum image of
+        # docs/spec/conventions.md#minimum-image, if that is within it.
         keep = i != j
         i, j = i[keep], j[keep]
         lo, hi = np.minimum(i, j), np.maximum(i, j)

@@ -1,4 +1,5 @@
-"""Dataset cache (SPEC §3): generated datasets live in one documented place, keyed by a hash.
+"""Dataset cache (docs/spec/data.md#cache): generated datasets live in one documented place, keyed
+by a hash.
 
 Location: ``$GRIPDEM_DATA`` if set, else the user cache directory
 (``platformdirs.user_cache_dir("gripdem")``, e.g. ``~/.cache/gripdem`` on Linux). A file name

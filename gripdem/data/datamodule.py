@@ -57,8 +57,9 @@ class TrajectoryDataModule(L.LightningDataModule):
     :mod:`gripdem.data.windows`), encoded (:mod:`gripdem.data.encodings`) with the fixed graph
     (:mod:`gripdem.data.graph`). Arguments mirror ``conf/data/default.yaml``.
 
-    ``graph_cutoff`` is in particle diameters (SPEC §2: D = 3 d). ``expect_boundary``
-    (``periodic`` | ``lees_edwards``), when given, must match the file's boundary.
+    ``graph_cutoff`` is in particle diameters (docs/spec/conventions.md#size-and-cutoff: D = 3 d).
+    ``expect_boundary`` (``periodic`` | ``lees_edwards``), when given, must match the file's
+    boundary.
     ``model_horizon`` (``model.horizon``): a model that predicts fewer frames than the split's
     horizon trains and validates on windows of its own horizon; the test windows keep the
     split's, and the runner chains the model over them (:mod:`gripdem.runner.chained_evaluation`).

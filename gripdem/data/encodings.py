@@ -9,7 +9,7 @@ leading batch axes ``...``):
 
 ``offsets`` are the float64 Lees-Edwards offsets of each frame (``None`` for a periodic box);
 decode takes the offsets of the PREDICTED frames. A difference between frames t and t+1 uses the
-offset of the later frame t+1 (SPEC §2).
+offset of the later frame t+1 (docs/spec/conventions.md#which-offset).
 
 Channels:
 
@@ -24,8 +24,9 @@ Channels:
   particle occupies at the ``anchor`` frame (the last observed frame of a window):
   :func:`gripdem.boundary.lattice_continuous_steps`. Decoding adds them up from the anchor and
   wraps each frame with its own offset, so a constant step is exactly the constant-velocity
-  rollout with the LE shift and velocity jump of every crossing (SPEC §11). This is the frame of
-  the exact (default) decoders; ``sincos`` and ``vct`` are the paper's wrapped-space encodings.
+  rollout with the LE shift and velocity jump of every crossing
+  (docs/spec/conventions.md#lattice-continuous). This is the frame of the exact (default) decoders;
+  ``sincos`` and ``vct`` are the paper's wrapped-space encodings.
 
 :class:`Normalizer` holds per-channel mean and std (from the training split only) as plain
 floats, so it can be stored in a checkpoint or in hyperparameters and restored, and the same
@@ -185,7 +186,8 @@ class SinCosEncoding(Encoding):
 
 
 class VCTEncoding(SinCosEncoding):
-    """8 channels: sin/cos differences with the z pair split into real + LE shift (SPEC §5)."""
+    """8 channels: sin/cos differences with the z pair split into real + LE shift
+    (docs/spec/model.md#input-channels)."""
 
     name = "vct"
     n_channels = 8
@@ -220,9 +222,10 @@ class VCTEncoding(SinCosEncoding):
     ) -> Array:
         """``exact_shift=False`` (the paper's learned VCT): positions from real + shift channels.
 
-        ``exact_shift=True`` (SPEC §8): ignore the shift channels, step with the real channels
-        only, detect an x-face crossing in decoded space (decoded x jumps by more than lx/2) and
-        apply the known shift of that frame's offset. Needs ``offsets (..., f)`` in a sheared box.
+        ``exact_shift=True`` (docs/spec/model.md#exact-shift): ignore the shift channels, step with
+        the real channels only, detect an x-face crossing in decoded space (decoded x jumps by more
+        than lx/2) and apply the known shift of that frame's offset. Needs ``offsets (..., f)`` in a
+        sheared box.
         """
         if not exact_shift:
             return super().decode(last, deltas, offsets)
@@ -244,7 +247,8 @@ class VCTEncoding(SinCosEncoding):
 
 class UnwrappedEncoding(Encoding):
     """3 channels: Cartesian steps of the lattice-continuous trajectory, in each particle's image
-    cell at the anchor frame (the exact frame of the default decoders, SPEC §11)."""
+    cell at the anchor frame (the exact frame of the default decoders,
+    docs/spec/model.md#exact-frame)."""
 
     name = "unwrapped"
     n_channels = 3

@@ -1,4 +1,5 @@
-"""The fixed interaction graph at the last observed frame (SPEC §5), as a sparse edge list.
+"""The fixed interaction graph at the last observed frame (docs/spec/model.md#fixed-graph), as a
+sparse edge list.
 
 Neighbours: every pair whose LE-aware minimum-image centre distance is below the cut-off D
 (default 3 particle diameters), found in O(n) by :func:`gripdem.boundary.neighbour_pairs`

@@ -1,4 +1,5 @@
-"""The three evaluation protocols (SPEC §4): which windows train, validate and test.
+"""The three evaluation protocols (docs/spec/protocols.md#protocols): which windows train, validate
+and test.
 
 - ``sims``: train, val and test are different simulations (by fractions, or explicit lists).
 - ``time``: each used simulation is cut in time at target-frame boundaries ``B1 < B2``: every

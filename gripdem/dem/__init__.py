@@ -1,4 +1,4 @@
-"""The built-in DEM generator (SPEC §9): the embedded default data source.
+"""The built-in DEM generator (docs/spec/dem.md): the embedded default data source.
 
 params (scene physics, preset sizes, force-law indices) -> config (every derived constant)
 -> packing (initial state) -> engine (state, neighbour-list rebuilds; kernels in forces_numba /

@@ -109,7 +109,8 @@ class GeneratorConfig:
     def boundary(self) -> Boundary:
         if self.scene.boundary == "periodic":
             return Boundary(self.box)
-        # time origin 0 = start of the driven spin-up: frame times are absolute (SPEC §9)
+        # time origin 0 = start of the driven spin-up: frame times are absolute
+        # (docs/spec/dem.md#time-origin)
         return Boundary(self.box, LeesEdwards(self.scene.shear_rate, sign=1, time_origin=0.0))
 
     @property
@@ -164,10 +165,11 @@ class GeneratorConfig:
         return out
 
     def check_time_step(self) -> None:
-        """Refuse a DEM step the explicit integrator cannot take (SPEC §9: dt ~ contact time
-        / 30): fewer than :data:`MIN_STEPS_PER_CONTACT` steps per contact time, or a step
-        above :data:`MAX_STEP_PER_DAMPING_TIME` of a damping time. The message names the
-        option that sets the step and the coefficient that makes it too large."""
+        """Refuse a DEM step the explicit integrator cannot take
+        (docs/spec/dem.md#step-and-cost: dt ~ contact time / 30): fewer than
+        :data:`MIN_STEPS_PER_CONTACT` steps per contact time, or a step above
+        :data:`MAX_STEP_PER_DAMPING_TIME` of a damping time. The message names the option that
+        sets the step and the coefficient that makes it too large."""
         dt, contact = self.dt, self.contact_time
         if contact / dt < MIN_STEPS_PER_CONTACT * (1.0 - 1e-9):
             raise ValueError(

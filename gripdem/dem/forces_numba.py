@@ -4,7 +4,8 @@ The force law (same as :mod:`gripdem.dem.forces_torch`, tested against it), per 
 ``(i, j, shift)`` with separation ``r = x_i - x_j - n_x (lx, 0, delta) - n_y ly - n_z lz``,
 unit normal ``n = r / |r|`` (from j to i), surface gap ``h = |r| - r_i - r_j`` and relative
 velocity ``v = v_i - v_j - n_x * image_vel * e_z`` (the image of j across an LE x face moves
-with ``n_x * shear_rate * lx`` along z: SPEC §9), ``v_n = v . n`` (< 0 approaching):
+with ``n_x * shear_rate * lx`` along z: docs/spec/dem.md#numerical-traps),
+``v_n = v . n`` (< 0 approaching):
 
 - contact (h < 0), linear spring-dashpot: ``F_c = k_n (-h) - c_n v_n`` along n,
   ``c_n = 2 zeta sqrt(m_eff k_n)``, zeta from the restitution coefficient;
@@ -246,9 +247,9 @@ def advance(
     stats,
 ):
     """Up to ``n_steps`` velocity-Verlet steps; stops early after the step at which the
-    neighbour list must be rebuilt (SPEC §9 rule, made conservative by one more step of
-    the fastest particle and of delta). ``force``/``torque`` hold the forces of the current
-    state on entry and on return. ``stats[0]`` keeps the largest overlap fraction seen.
+    neighbour list must be rebuilt (docs/spec/dem.md#numerical-traps rule, made conservative by one
+    more step of the fastest particle and of delta). ``force``/``torque`` hold the forces of the
+    current state on entry and on return. ``stats[0]`` keeps the largest overlap fraction seen.
     Returns ``(steps done, rebuild due)``."""
     n = pos.shape[0]
     image_vel = law[LAW_IMAGE_VEL]

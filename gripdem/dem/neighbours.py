@@ -3,14 +3,15 @@
 A pair ``(i, j, shift)`` with ``shift = (n_x, n_y, n_z)`` means the separation
 ``r_ij = x_i - x_j - n_x (lx, 0, delta) - n_y (0, ly, 0) - n_z (0, 0, lz)``
 (:func:`gripdem.boundary.apply_lattice_shift`). Lists keep the integer shifts so that the
-kernels recompute separations with the *current* LE offset between rebuilds (SPEC §9).
+kernels recompute separations with the *current* LE offset between rebuilds
+(docs/spec/dem.md#numerical-traps).
 
 Building: a numba cell list proposes candidate pairs (cells at least one cut-off wide; for
 the cells across an x face the z range is taken around ``z_i -/+ delta``, so the sliding
 images are searched where they are), then :func:`gripdem.boundary.lattice_shift` picks the
 minimum image and the cut-off filters. Boxes narrower than three cut-offs fall back to all
-pairs. The rebuild rule (SPEC §9: ``|delta change| + 2 * largest displacement > skin``) is
-checked inside the kernels' step loops.
+pairs. The rebuild rule (docs/spec/dem.md#numerical-traps: ``|delta change| + 2 * largest
+displacement > skin``) is checked inside the kernels' step loops.
 """
 
 from __future__ import annotations

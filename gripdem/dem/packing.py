@@ -1,4 +1,5 @@
-"""Initial packings without overlaps at the target volume fraction (SPEC §9).
+"""Initial packings without overlaps at the target volume fraction
+(docs/spec/dem.md#numerical-traps).
 
 Random sequential insertion jams near phi ~ 0.38, so particles are inserted at a lower
 volume fraction (``pack_volume_fraction``, default 0.3) with shrunken radii, then the radii

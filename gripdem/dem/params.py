@@ -1,8 +1,8 @@
 """Generator parameters: scene physics and preset sizes, and the indices of the force law.
 
 This module (indices) and :mod:`gripdem.dem.config` (values) are the one place where the
-constants of the force law are defined and derived
-(SPEC §9). The numba and torch kernels both read the packed array built by
+constants of the force law are defined and derived (docs/spec/dem.md#default-parameters). The
+numba and torch kernels both read the packed array built by
 :meth:`gripdem.dem.config.GeneratorConfig.force_law`, indexed by the ``LAW_*`` constants below;
 neither kernel derives a coefficient of its own.
 
@@ -50,7 +50,8 @@ TANGENTIAL_MASS_FACTOR = 2.0 / 7.0
 #: fewest DEM steps per contact time accepted. The explicit spring-dashpot step diverges near
 #: 2-3 steps per contact (measured on the tiny LE scene: 3 stays at the 30-step overlaps, 2
 #: lets particles pass through each other at 1000x the flow speed without any NaN, so the
-#: engine could not notice); 10 keeps a 4x margin and resolves a collision (SPEC §9: ~30).
+#: engine could not notice); 10 keeps a 4x margin and resolves a collision
+#: (docs/spec/dem.md#step-and-cost: ~30).
 MIN_STEPS_PER_CONTACT = 10.0
 #: the DEM step must stay below this fraction of every damping time m / c (Stokes drag and
 #: regularised lubrication): explicit damping diverges at dt = 2 m / c, a 4x margin.

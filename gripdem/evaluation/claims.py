@@ -1,5 +1,6 @@
-"""``python -m gripdem.claims SWEEP_DIR [SWEEP_DIR ...]``: the paper's claims (SPEC §7) as
-hypotheses, tested on a sweep's out-of-sample results over seeds.
+"""``python -m gripdem.claims SWEEP_DIR [SWEEP_DIR ...]``: the paper's claims
+(docs/spec/evaluation.md#claims) as hypotheses, tested on a sweep's out-of-sample results over
+seeds.
 
 The claims (models by their config names, ``--grip/--pct/--vct`` to test other variants):
 
@@ -204,7 +205,7 @@ def _range(values: list[float]) -> str:
 
 def to_markdown(claims: list[tuple[str, list]]) -> str:
     lines = [
-        "# The paper's claims (SPEC §7), out of sample",
+        "# The paper's claims (docs/spec/evaluation.md#claims), out of sample",
         "",
         f"Comparisons: means over seeds, decided at {MARGIN:g} standard errors of the difference.",
         "",

@@ -1,5 +1,7 @@
-"""Scores of an ensemble forecast (SPEC §13): the fair CRPS, the spread/skill ratio and the rank
-histogram, for ensembles of any size (a point forecast is an ensemble of one).
+"""Scores of an ensemble forecast: the fair CRPS (docs/spec/long-rollouts.md#crps), the spread/skill
+ratio (docs/spec/long-rollouts.md#spread-skill) and the rank histogram
+(docs/spec/long-rollouts.md#rank-histogram), for ensembles of any size (a point forecast is an
+ensemble of one).
 
 Everything is computed from *residuals*: ``r_m = y - x_m``, the LE-aware minimum-image
 difference between the truth ``y`` and member ``m``'s prediction ``x_m`` at the same frame

@@ -1,5 +1,6 @@
-"""What the run figures show, computed from a :class:`Predictions` (SPEC §6): the curves,
-samples and counts that :mod:`gripdem.plots.run` draws without computing anything itself.
+"""What the run figures show, computed from a :class:`Predictions`
+(docs/spec/evaluation.md#run-figures): the curves, samples and counts that :mod:`gripdem.plots.run`
+draws without computing anything itself.
 
 Lengths are in particle diameters d, velocities in d per frame interval. One dataclass per
 figure; :func:`run_figure_data` computes all of them.

@@ -1,4 +1,4 @@
-"""Evaluation metrics (SPEC §6), all through :mod:`gripdem.boundary`.
+"""Evaluation metrics (docs/spec/evaluation.md#rmse), all through :mod:`gripdem.boundary`.
 
 Layout: predicted and true positions are ``(windows, horizon, particles, 3)`` wrapped
 Cartesian; ``offsets`` are the float64 LE offsets of the predicted frames ``(windows, horizon)``

@@ -1,10 +1,11 @@
-"""Physics-level evaluation of predicted trajectories beside the truth (SPEC §6).
+"""Physics-level evaluation of predicted trajectories beside the truth
+(docs/spec/evaluation.md#physics).
 
 Everything works on wrapped Cartesian positions with the LE-aware minimum image of
 :mod:`gripdem.boundary`. Pair searches use :func:`gripdem.boundary.neighbour_pairs` (O(n)
 cell lists on the triclinic Lees-Edwards cell, never an n x n matrix); for a cut-off below half
 the smallest box length every pair has at most one image inside the cut-off, and that image is
-the SPEC minimum image.
+the minimum image of docs/spec/conventions.md#minimum-image.
 
 Layouts (as :mod:`gripdem.evaluation.metrics`): one frame ``(particles, 3)`` with a scalar offset, a
 stack of frames ``(frames, particles, 3)`` with offsets ``(frames,)``, windows of predictions
@@ -26,8 +27,8 @@ from gripdem.boundary import neighbour_pairs as find_pairs
 
 Array = Any
 
-#: pairs closer than ``OVERLAP_TOLERANCE * diameter`` count as overlapping (SPEC §6): the
-#: soft-contact DEM truth has pairs slightly below d
+#: pairs closer than ``OVERLAP_TOLERANCE * diameter`` count as overlapping
+#: (docs/spec/evaluation.md#overlap): the soft-contact DEM truth has pairs slightly below d
 OVERLAP_TOLERANCE = 0.98
 
 

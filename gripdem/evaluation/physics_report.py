@@ -1,5 +1,6 @@
 """The physics report of a run's test windows: the truth, the model and every baseline side by
-side (SPEC §6), from a :class:`~gripdem.evaluation.predictions.Predictions` alone.
+side (docs/spec/evaluation.md#physics), from a :class:`~gripdem.evaluation.predictions.Predictions`
+alone.
 
 Per-particle RMSE does not say whether a predicted flow is physical. For each trajectory set
 (``truth``, ``model``, each baseline) over the horizon this computes

@@ -20,7 +20,7 @@ Layout (lengths in the source data's units, metres by default; times in seconds)
 
 The LE offset of predicted frame j of window w is ``Boundary.offset(times[w, j])``; the truth
 is compared with the prediction at the same frame (that frame's offset), displacements between
-frames use the later frame's offset (SPEC §2).
+frames use the later frame's offset (docs/spec/conventions.md#which-offset).
 :func:`gripdem.evaluation.evaluate.evaluate_predictions` recomputes all metrics from the file alone.
 """
 

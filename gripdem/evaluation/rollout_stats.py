@@ -1,4 +1,5 @@
-"""Statistics of a long rollout beside the truth, per block of frames (SPEC §12 definitions).
+"""Statistics of a long rollout beside the truth, per block of frames (definitions:
+docs/spec/long-rollouts.md#rollout-statistics).
 
 Over long times no forecaster beats the mean on RMSE; a surrogate must keep the statistics of
 the flow. For two trajectories of the same scene, ``model`` and ``truth`` ``(T, N, 3)`` wrapped
@@ -21,8 +22,8 @@ the flow. For two trajectories of the same scene, ``model`` and ``truth`` ``(T, 
 
 Over the whole rollout (at least ``DIFFUSION_LAGS[1]`` frames): the self-diffusion coefficient
 per axis, ``D_a`` = half the slope of the non-affine MSD along ``a`` against the lag, fitted
-between lags 200 and 1000 frames (SPEC §13; d² per frame interval), the flow removed with the
-truth's profile fitted over the whole rollout.
+between lags 200 and 1000 frames (docs/spec/long-rollouts.md#self-diffusion; d² per frame interval),
+the flow removed with the truth's profile fitted over the whole rollout.
 
 Lengths in diameters; per-block values are lists (one entry per block), ratios are model/truth.
 The same function gives the noise floor: two independent DEM simulations as ``model`` and

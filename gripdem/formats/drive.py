@@ -1,6 +1,6 @@
 """The periodic scene's drive for imported data: ``--body-force A`` of ``python -m
 gripdem.convert``, a body acceleration ``a_z(x) = A cos(2 pi x / lx)`` along the flow axis z
-(SPEC §2), recorded in the dataset's ``body_force_amplitude`` attribute.
+(docs/spec/conventions.md#scenes), recorded in the dataset's ``body_force_amplitude`` attribute.
 
 Foreign files do not say how their simulation was driven, and a model trained with a drive is
 applied (``gripdem.predict``) only to data recorded with the same drive, so the importers take

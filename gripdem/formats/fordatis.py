@@ -1,4 +1,5 @@
-"""Import the authors' published Fordatis format (SPEC §3) into gripdem's :class:`TrajectoryData`.
+"""Import the authors' published Fordatis format (docs/spec/data.md#fordatis) into gripdem's
+:class:`TrajectoryData`.
 
 Input: a tar archive (``.tar.gz``, ``.tar``, ...) of HDF5 files, or one HDF5 file. Every HDF5
 file is one simulation (the reference scripts read only the first). In each file, one group
@@ -17,7 +18,7 @@ What the importer does (and why):
 - files with different frame counts are trimmed to the shortest (kept frames from the start),
   and the report says which were trimmed; files must share particle count, box and frame interval;
 - the files carry no particle size: ``diameter`` (default the paper's 2.5e-6 m, read as a
-  diameter, SPEC §2) sets the radius;
+  diameter, docs/spec/conventions.md#size-and-cutoff) sets the radius;
 - Lees-Edwards data: the shear rate comes from the user, the sign convention and the time origin
   (time at which delta = 0) are inferred from particles that cross the x faces, and the shear
   rate is checked against them: :func:`gripdem.formats.le_inference.infer_lees_edwards`. Periodic
@@ -57,7 +58,7 @@ from gripdem.formats.le_inference import (
     infer_lees_edwards,
 )
 
-#: the paper's particle size, taken as a diameter (SPEC §2)
+#: the paper's particle size, taken as a diameter (docs/spec/conventions.md#size-and-cutoff)
 DEFAULT_DIAMETER = 2.5e-6
 
 

@@ -1,4 +1,5 @@
-"""Import LAMMPS / LIGGGHTS text dumps (SPEC §3) into gripdem's :class:`TrajectoryData`.
+"""Import LAMMPS / LIGGGHTS text dumps (docs/spec/data.md#lammps) into gripdem's
+:class:`TrajectoryData`.
 
 What the importer does (and why):
 

@@ -4,8 +4,9 @@ Importers of foreign data (the authors' Fordatis files, later LAMMPS dumps) know
 from the user but not the sign convention of the producing code nor the time at which its
 offset delta was 0. Both are read off the particles that cross the x faces: with the right
 settings every frame-to-frame displacement, taken as the LE-aware minimum image with the LATER
-frame's offset (SPEC §2), is as small as the moves of the particles that do not cross. With the
-wrong sign a crosser's z jumps by ``2*delta`` (mod lz), with a wrong origin by the offset error.
+frame's offset (docs/spec/conventions.md#which-offset), is as small as the moves of the particles
+that do not cross. With the wrong sign a crosser's z jumps by ``2*delta`` (mod lz), with a wrong
+origin by the offset error.
 
 "Small" is ``max(SMALL_FACTOR * largest non-crosser displacement, SMALL_FLOOR * diameter)``: a
 crosser is a particle near an x face, so the non-crossers near the faces move as much as it

@@ -2,12 +2,12 @@
 
 Rigid-ish DEM particles never overlap by more than ~1e-4 d (the soft contacts of the built-in
 DEM: ~1e-5 d), and a model's frame that packs particles into each other is outside everything
-it was trained on and explodes when handed back to a DEM (SPEC §12). After each predicted frame
-the overlapping pairs of the neighbour list are pushed apart along their centre line, each
-particle by half the overlap (Gauss-Seidel sweeps over the candidate pairs, compiled with numba),
-until no pair is closer than ``distance * (1 - tolerance)`` or ``sweeps`` are done. Every push
-moves two particles by opposite amounts: the centre of mass does not move, so a correction
-cannot make the suspension drift.
+it was trained on and explodes when handed back to a DEM
+(docs/spec/long-rollouts.md#overlaps-first). After each predicted frame the overlapping pairs of the
+neighbour list are pushed apart along their centre line, each particle by half the overlap
+(Gauss-Seidel sweeps over the candidate pairs, compiled with numba), until no pair is closer than
+``distance * (1 - tolerance)`` or ``sweeps`` are done. Every push moves two particles by opposite
+amounts: the centre of mass does not move, so a correction cannot make the suspension drift.
 
 Positions are the neighbour list's physical images ``q (N, 3)``; the list gives each pair's
 image shift. Candidates are the listed pairs within ``CANDIDATE_MARGIN`` contact distances,

@@ -1,4 +1,5 @@
-"""Linear autoregressive baseline (SPEC §6): the strongest predictor without interactions.
+"""Linear autoregressive baseline (docs/spec/evaluation.md#baselines): the strongest predictor
+without interactions.
 
 Per particle (one set of coefficients shared by all particles), a ridge regression of the next
 frame-to-frame displacement on the last ``lags`` displacements and ``sin``/``cos`` of the
@@ -223,7 +224,8 @@ class LinearAR:
 
 def fit_on_training_frames(datamodule, lags: int, ridge: float = 1e-6) -> LinearAR:
     """The linear AR baseline fitted on the frames that a set-up
-    :class:`~gripdem.data.datamodule.TrajectoryDataModule`'s training windows cover (SPEC §6)."""
+    :class:`~gripdem.data.datamodule.TrajectoryDataModule`'s training windows cover
+    (docs/spec/evaluation.md#baselines)."""
     return LinearAR.fit(
         datamodule.training_trajectories(overlap=lags + 1),
         datamodule.meta.boundary,

@@ -1,4 +1,4 @@
-"""Baselines evaluated on the same windows as every model (SPEC §6).
+"""Baselines evaluated on the same windows as every model (docs/spec/evaluation.md#baselines).
 
 All take the observed frames of each window, ``observed`` ``(windows, frames_in, particles, 3)``
 wrapped Cartesian (float64 recommended), and the float64 LE offsets of the observed and of the
@@ -8,7 +8,7 @@ predicted frames, and return predictions ``(windows, horizon, particles, 3)`` wr
 - ``constant_velocity``: the last observed frame-to-frame displacement (minimum image with the
   later frame's offset), extrapolated in lattice-continuous coordinates and wrapped with each
   predicted frame's own offset, so a particle crossing an LE face gets the z shift and the
-  velocity jump (SPEC §2).
+  velocity jump (docs/spec/conventions.md#crossing).
 - ``linear_ar``: the per-particle linear autoregressive filter fitted on the training windows
   (:mod:`gripdem.models.autoregressive`), LE-exact like constant velocity.
 - ``mean_flow``: the imposed profile (``cosine``: u_z = A cos(2 pi x / lx) + B for the periodic

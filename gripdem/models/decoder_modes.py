@@ -1,4 +1,5 @@
-"""How each decoder mode (SPEC §5) feeds, advances, decodes and trains the seq2seq GRU.
+"""How each decoder mode (docs/spec/model.md#decoder-modes) feeds, advances, decodes and trains the
+seq2seq GRU.
 
 Two frames, chosen by the encoding (one source of truth):
 
@@ -8,8 +9,8 @@ lattice-continuous Cartesian coordinates anchored at the last observed frame
 velocity (CV) misses, in units of the per-step velocity change of the training data
 (``Normalizer.change_std``); positions are ``last + cumsum(v0 + deviation)`` in float64 and each
 predicted frame is wrapped with its own offset, so the LE shift and the velocity jump of a
-crossing are applied analytically (SPEC §11). With every learned output zero a model IS the CV
-baseline (to float64 round-off), in both scenes, at every split.
+crossing are applied analytically (docs/spec/model.md#exact-frame). With every learned output zero a
+model IS the CV baseline (to float64 round-off), in both scenes, at every split.
 
 =======  ==============================  ==========================  ==========================
 mode     decoder input (direct; GRU)     output per step             loss (relative to CV's)
@@ -29,11 +30,11 @@ square of the RMSE ratio to CV when trained on positions. In this frame PCT and 
 their loss only: VCT's LE shift channels are replaced by the analytic LE handling.
 
 **Paper (encodings ``sincos`` and ``vct``)**, for reproduction: the paper's wrapped sin/cos
-space (SPEC §5). ``grip`` repeats the last observed velocity (CV along a chord in feature space:
-not exact for LE crossers), ``pct`` / ``vct`` add the last observed delta per step
-(``residual_base = constant_velocity``) or stay; the loss is the MSE of normalised cumulative
-deltas (grip/pct) or of the 8-channel deltas (vct; ``vct_shift=exact`` drops the shift channels
-and applies the known shift when decoding, SPEC §8).
+space (docs/spec/model.md#input-channels). ``grip`` repeats the last observed velocity (CV along a
+chord in feature space: not exact for LE crossers), ``pct`` / ``vct`` add the last observed delta
+per step (``residual_base = constant_velocity``) or stay; the loss is the MSE of normalised
+cumulative deltas (grip/pct) or of the 8-channel deltas (vct; ``vct_shift=exact`` drops the shift
+channels and applies the known shift when decoding, docs/spec/model.md#exact-shift).
 """
 
 from __future__ import annotations

@@ -120,7 +120,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             the graph-conv encoder's context is its last time step).
         zero_mean: exact frame: remove the mean over particles of the deviation from CV at every
             step (the truth's mean displacement equals CV's: pair forces cancel and the drag's
-            mean flow has a fixed average, SPEC §12), so a rollout cannot drift as a whole.
+            mean flow has a fixed average, docs/spec/long-rollouts.md#net-drift), so a rollout
+            cannot drift as a whole.
         history_noise: exact frame: random-walk noise on the observed frames during training,
             final std in diameters (:mod:`gripdem.models.history_noise`; 0: off).
         n_particles: needed only by ``trainable_graph=dense``.

@@ -1,4 +1,4 @@
-"""Sparse graph-convolution encoder of GRIP++ (SPEC §5).
+"""Sparse graph-convolution encoder of GRIP++ (docs/spec/model.md#graph-conv).
 
 The graph operation multiplies node features by ``G_fixed + G_train`` with a sparse matrix,
 so its cost is O(edges x channels x time) and no n x n tensor is ever built (except in the
@@ -25,7 +25,8 @@ class EdgeGraph:
 
     edge_index: ``(2, E)`` long, rows ``(target i, source j)`` in flattened node numbering
     (sample b, particle p -> ``b * particles + p``), self pairs included.
-    fixed_weight: ``(E,)`` normalised fixed-graph weights G_fixed[i, j] (SPEC §5).
+    fixed_weight: ``(E,)`` normalised fixed-graph weights G_fixed[i, j]
+    (docs/spec/model.md#fixed-graph).
     edge_features: ``(E, F)`` features for learned edge weights (e.g. displacement / cut-off
     and distance / cut-off).
     """
@@ -99,7 +100,7 @@ def sparse_aggregate(
 
 class EdgeWeightNet(nn.Module):
     """Learned edge weight from edge features; the last layer starts at zero so that the
-    trainable graph contributes nothing at initialisation (SPEC §5)."""
+    trainable graph contributes nothing at initialisation (docs/spec/model.md#trainable-graph)."""
 
     def __init__(self, in_features: int, hidden: int = 16):
         super().__init__()

@@ -3,9 +3,9 @@
 The paper's graph operation averages neighbours' features with scalar weights, so it cannot
 express "pushed away from neighbour j along r_ij". In these overdamped suspensions a particle's
 velocity is the local flow plus the contact and cohesion forces on it over the drag
-coefficient (SPEC §11), and those forces are set by the gaps to its neighbours (overlaps of
-~1e-5 d for the linear spring, gaps below 0.1 d for cohesion) and change as the flow closes and
-opens those gaps. This encoder gives every pair what it needs to learn that:
+coefficient (docs/spec/model.md#what-the-encoder-sees), and those forces are set by the gaps to its
+neighbours (overlaps of ~1e-5 d for the linear spring, gaps below 0.1 d for cohesion) and change as
+the flow closes and opens those gaps. This encoder gives every pair what it needs to learn that:
 
 - edge inputs: the LE-aware minimum-image vector ``r_ij`` over the cut-off, the surface gap
   ``g = |r_ij| - d`` (computed in float64 before the cast, :mod:`gripdem.data.graph`) in three

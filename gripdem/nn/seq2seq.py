@@ -108,7 +108,7 @@ class Seq2SeqGRU(nn.Module):
 
 
 class TrajectoryDecoder(nn.Module):
-    """``n_heads`` seq2seq networks, outputs averaged (SPEC §5).
+    """``n_heads`` seq2seq networks, outputs averaged (docs/spec/model.md#decoder-modes).
 
     forward(features ``(batch, particles, time, channels)``, state ``(batch, particles, S)``,
     base ``(batch, particles, O)`` or None, horizon, drift ``(batch, particles, S)`` or None)

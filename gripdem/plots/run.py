@@ -1,4 +1,4 @@
-"""The paper's figures for one run (SPEC §6), drawn from its computed
+"""The paper's figures for one run (docs/spec/evaluation.md#run-figures), drawn from its computed
 :class:`~gripdem.evaluation.figure_data.RunFigureData`. Lengths in particle diameters d,
 velocities in d per frame interval. :func:`make_run_figures` draws them all, writes
 ``<name>.png`` atomically and, given a TensorBoard ``SummaryWriter``, logs each as an image.

@@ -1,6 +1,7 @@
 """The scores figure of a run: the CRPS per predicted step of the model and every baseline (a
 point forecast's CRPS is its mean absolute error, so every run has one), and for an ensemble the
-spread/skill ratio per step and the rank histogram of the truth among the members (SPEC §13).
+spread/skill ratio per step (docs/spec/long-rollouts.md#spread-skill) and the rank histogram of the
+truth among the members (docs/spec/long-rollouts.md#rank-histogram).
 
 Input: the ``scores`` curves of :meth:`gripdem.models.evaluation.RolloutEvaluation.
 ensemble_metrics`: ``crps_over_d`` (set -> per step), and for an ensemble ``spread_skill`` (per

@@ -10,10 +10,10 @@ forecast) is fitted on the new data as in any run. Before training, the source m
 tested on the same test windows, so the result table shows the model before and after
 fine-tuning beside the baselines.
 
-A deterministic source may start an ensemble run (``model=ensemble``, SPEC §13): the run's
-encoder adds the latent-noise path (its embeddings start at their initialisation, every other
-weight is the source's), so the members start around the source's mean forecast and training on
-the fair CRPS learns their spread (:func:`initialise`).
+A deterministic source may start an ensemble run (``model=ensemble``,
+docs/spec/long-rollouts.md#ensembles): the run's encoder adds the latent-noise path (its embeddings
+start at their initialisation, every other weight is the source's), so the members start around the
+source's mean forecast and training on the fair CRPS learns their spread (:func:`initialise`).
 
 Fine-tuning never loses what it started from: the source model, as initialised, is validated
 before the first step (:func:`validate_start`), and after training it stays the run's model

@@ -1,5 +1,5 @@
 """Slow tier: one default simulation per scene (2000 particles x 201 frames after a 1.1 ms
-spin-up) passes every validation check, within the time budget of SPEC §9."""
+spin-up) passes every validation check, within the time budget of docs/spec/dem.md#step-and-cost."""
 
 from __future__ import annotations
 

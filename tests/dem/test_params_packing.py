@@ -1,4 +1,5 @@
-"""Derived parameters of the default scenes (SPEC §9) and the initial packing."""
+"""Derived parameters of the default scenes (docs/spec/dem.md#default-parameters) and the initial
+packing."""
 
 from __future__ import annotations
 

@@ -196,9 +196,9 @@ def test_le_crossing_remaps_position_and_velocity(two_particles, backend):
 
 
 def test_pair_across_le_face_feels_what_it_feels_inside(two_particles, pair_kernel, backend):
-    """SPEC §9: across the x faces the relative velocity needs v_z -/+ shear_rate*lx, like
-    the separation needs z -/+ delta. A pair in affine flow straddling the +x face must feel
-    exactly the forces of the same pair in the middle of the box."""
+    """docs/spec/dem.md#numerical-traps: across the x faces the relative velocity needs v_z -/+
+    shear_rate*lx, like the separation needs z -/+ delta. A pair in affine flow straddling the +x
+    face must feel exactly the forces of the same pair in the middle of the box."""
     cfg = two_particles(
         "lebc", friction=0.3, hamaker=1e-20, lubrication_viscosity=1e-3, fluid_viscosity=0.0
     )

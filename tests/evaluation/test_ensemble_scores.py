@@ -1,6 +1,6 @@
-"""The ensemble scores (SPEC §13): the fair CRPS against the closed form for Gaussians, the
-spread/skill ratio and the rank histogram on synthetic calibrated, under- and over-dispersed
-ensembles, and the ensemble mean across periodic and Lees-Edwards images."""
+"""The ensemble scores: the fair CRPS (docs/spec/long-rollouts.md#crps) against the closed form for
+Gaussians, the spread/skill ratio and the rank histogram on synthetic calibrated, under- and
+over-dispersed ensembles, and the ensemble mean across periodic and Lees-Edwards images."""
 
 import math
 

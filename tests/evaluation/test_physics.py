@@ -1,5 +1,6 @@
 """Physics-level evaluation against independent brute-force references (O(n^2) loops over the
-SPEC's minimum-image rule) and against motions whose answer is known in closed form."""
+minimum-image rule of docs/spec/conventions.md#minimum-image) and against motions whose answer is
+known in closed form."""
 
 import math
 
@@ -27,7 +28,8 @@ DT = 0.05
 
 
 def brute_min_image(a, b, box, delta):
-    """The SPEC §2 rule written out with scalar if-tests and a while loop (no numpy tricks)."""
+    """The rule of docs/spec/conventions.md#minimum-image written out with scalar if-tests and a
+    while loop (no numpy tricks)."""
     rx, ry, rz = (float(a[k] - b[k]) for k in range(3))
     if rx >= box.lx / 2:
         rx, rz = rx - box.lx, rz - delta

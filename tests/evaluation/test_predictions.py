@@ -52,7 +52,8 @@ def make_predictions(w=3, n=40, horizon=6, le=True, seed=0, noise=0.01) -> Predi
 
 
 def slow_rmse(pred, true, times, boundary):
-    """SPEC §6 RMSE with a per-particle Python loop and the SPEC minimum-image if-tests."""
+    """The RMSE of docs/spec/evaluation.md#rmse with a per-particle Python loop and the
+    minimum-image if-tests of docs/spec/conventions.md#minimum-image."""
     box = boundary.box
     total, count = 0.0, 0
     w, f, n, _ = true.shape

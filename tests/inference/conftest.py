@@ -2,9 +2,10 @@
 real Lightning checkpoints of untrained models.
 
 An untrained model is exactly the constant-velocity (CV) predictor (every learned output starts
-at zero, SPEC §11), which makes rollouts checkable to round-off: a chained rollout of it must
-equal the one-shot CV rollout. The checkpoints are written by a Lightning ``Trainer`` after a
-zero-step ``fit`` of the model :mod:`gripdem.runner.experiment` builds from the smoke preset.
+at zero, docs/spec/model.md#exact-frame), which makes rollouts checkable to round-off: a chained
+rollout of it must equal the one-shot CV rollout. The checkpoints are written by a Lightning
+``Trainer`` after a zero-step ``fit`` of the model :mod:`gripdem.runner.experiment` builds from the
+smoke preset.
 """
 
 from __future__ import annotations

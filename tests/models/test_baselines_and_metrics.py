@@ -88,7 +88,7 @@ def test_stay_is_exact_on_static_particles_and_dispatch():
 
 
 def slow_reference_rmse(pred, true, offsets):
-    """SPEC §6 formula with Python loops, one particle at a time."""
+    """The formula of docs/spec/evaluation.md#rmse with Python loops, one particle at a time."""
     total, count = 0.0, 0
     for s in range(pred.shape[0]):
         for t in range(pred.shape[1]):

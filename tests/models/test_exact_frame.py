@@ -1,7 +1,7 @@
-"""The exact frame's invariant (SPEC §11): with every learned output zero a model IS constant
-velocity, to float64 round-off, in both scenes, at every split, for every decoder mode and both
-encoders, on windows where many particles cross the LE faces in the history and the horizon.
-The paper's wrapped-space decoding is not exact for crossers (shown beside it)."""
+"""The exact frame's invariant (docs/spec/model.md#exact-frame): with every learned output zero a
+model IS constant velocity, to float64 round-off, in both scenes, at every split, for every decoder
+mode and both encoders, on windows where many particles cross the LE faces in the history and the
+horizon. The paper's wrapped-space decoding is not exact for crossers (shown beside it)."""
 
 import numpy as np
 import pytest

@@ -208,7 +208,8 @@ def test_paper_vct_exact_shift_reproduces_the_le_jumps_of_affine_shear(tmp_path)
     dm = datamodule(
         shear_with_crossings(tmp_path), "vct", split="20-8", history_len=3, protocol="paper"
     )
-    exact = make_module(dm, "vct", "vct", "exact")  # the paper's 8 channels, SPEC §8
+    # the paper's 8 channels, docs/spec/model.md#exact-shift
+    exact = make_module(dm, "vct", "vct", "exact")
     learned = make_module(dm, "vct", "vct", "learned")
     crossers, worst_learned = 0, 0.0
     for batch in dm.test_dataloader():

@@ -4,8 +4,8 @@ circle. The slow cases run in ``experiments/benchmarks/stress.py``.
 
 Every test's docstring says what was tried and what must hold. Real components throughout: the
 built-in DEM, real HDF5 files, models built by :mod:`gripdem.runner.experiment`. Models that are
-not trained are either untrained (an exact-frame model is then constant velocity, SPEC §11) or
-"perturbed" (``tests/support/stress_models.py``).
+not trained are either untrained (an exact-frame model is then constant velocity,
+docs/spec/model.md#exact-frame) or "perturbed" (``tests/support/stress_models.py``).
 """
 
 from __future__ import annotations

@@ -12,17 +12,7 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 import gripdem
-from gripdem.boundary import displacement  # the LE-aware minimum image (gripdem's conventions)
-
-
-def rmse_over_d(predicted, truth, scene: gripdem.Scene, times) -> np.ndarray:
-    """Per frame ``(frames,)``: RMSE of positions ``(frames, N, 3)`` in diameters."""
-    box = scene.to_boundary().box
-    error = displacement(predicted, truth, box, scene.offsets(times)[:, None])
-    return np.sqrt((error**2).sum(-1).mean(-1)) / scene.diameter
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -45,17 +35,17 @@ def main(argv: list[str] | None = None) -> None:
     for note in run.notes:
         print(f"note: {note}")
 
-    # 3. out of sample, beside constant velocity (the last observed step, repeated)
-    truth = data.positions[0, k1 : k1 + frames]
-    future = data.times[0, k1 : k1 + frames]
-    box, offsets = data.scene.to_boundary().box, data.scene.offsets(data.times[0])
-    step = displacement(history[-1], history[-2], box, offsets[k1 - 1])
-    cv = np.stack([history[-1] + (j + 1) * step for j in range(frames)])
-    model_error = rmse_over_d(run.predicted, truth, data.scene, future)
-    cv_error = rmse_over_d(cv, truth, data.scene, future)
+    # 3. out of sample, beside constant velocity from the same observed frames (LE-aware
+    #    minimum image, each frame with its own offset)
+    error = run.error(data.positions[0, k1 : k1 + frames])
     print("frame   model RMSE/d   constant velocity RMSE/d")
     for j in sorted({0, 9, frames - 1}):
-        print(f"{j + 1:5d}   {model_error[j]:12.4g}   {cv_error[j]:12.4g}")
+        model_error, cv_error = (
+            error.per_frame_over_d[j],
+            error.constant_velocity_per_frame_over_d[j],
+        )
+        print(f"{j + 1:5d}   {model_error:12.4g}   {cv_error:12.4g}")
+    print(f"all frames: {error.ratio_to_constant_velocity:.3f} of constant velocity's RMSE")
 
     # 4. the physics of the rollout beside the DEM's over the same frames
     dem = gripdem.Trajectory(

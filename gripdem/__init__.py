@@ -15,10 +15,20 @@ if TYPE_CHECKING:  # the names below, for type checkers and IDEs
 
 #: the names of :mod:`gripdem.api` available as ``gripdem.<name>``
 API_NAMES = (
+    "CheckpointError",
+    "DatasetError",
+    "GenerationError",
+    "GripdemError",
+    "IncompatibleError",
     "Model",
+    "PhysicsReport",
+    "RolloutDiverged",
+    "RolloutError",
     "RolloutResult",
     "Scene",
+    "SplitError",
     "Surrogate",
+    "TRAINING",
     "Trajectory",
     "generate",
     "load_model",

@@ -4,7 +4,7 @@ Composes ``conf/config.yaml`` (validated by :mod:`gripdem.runner.config_schema`)
 scene's dataset exists, trains, tests out of sample beside the baselines, writes everything
 under the job's output directory and returns ``optimized_metric`` for sweepers (Optuna).
 
-    python -m gripdem.run                                   # default scene, fast preset
+    python -m gripdem.run                                   # default scene, default preset
     python -m gripdem.run -m split=190-10,100-100 model=vct # a multirun sweep
     python -m gripdem.run experiment=smoke scene=lebc       # seconds, tiny scene
 

@@ -24,7 +24,7 @@ ENTRY_POINTS = {
 }
 #: the package version, one place (imported by the layers that stamp files with it), and where
 #: the configuration files are (read by the entry points and the API)
-GROUND_MODULES = {"_version", "config_files"}
+GROUND_MODULES = {"_version", "config_files", "errors"}
 LAYERS = {
     "api",  # the Python entry point: the stable names re-exported at ``gripdem``
     "boundary",

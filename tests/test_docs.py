@@ -84,7 +84,10 @@ def check_api_reference(page: Path) -> None:
     text = " ".join(html.unescape(re.sub(r"<[^>]+>", "", raw)).split())
     for name in gripdem.api.__all__:
         obj = getattr(gripdem.api, name)
-        anchor = f'id="{obj.__module__}.{name}"'
+        if isinstance(obj, str):  # a constant (TRAINING): named in the page's table
+            assert f"`{name}`" in text or name in text, f"{name}: not on the reference page"
+            continue
+        anchor = f'id="{obj.__module__}.{obj.__qualname__}"'
         assert anchor in raw, f"{name}: no entry {anchor} on the Python API reference page"
         first = " ".join(re.split(r"\.\s", obj.__doc__.strip())[0].split())
         first = re.sub(r"``?([^`]+)``?", r"\1", first)
@@ -230,3 +233,19 @@ def test_the_readme_results_table_is_its_source_file():
         "| pbc | 190-10 | grip (interaction) | 0.00999",
     )
     assert stale != readme and script.replace_block(stale, table) == readme
+
+
+def test_the_model_cards_are_what_the_shipped_files_say():
+    """gripdem/inference/pretrained/NAME.md is regenerated from NAME.safetensors (its card and
+    hyperparameters) by experiments/release/ship_pretrained.py --cards; --check fails, naming
+    the file, when they disagree (e.g. an encoder described by hand)."""
+    proc = subprocess.run(
+        [sys.executable, "experiments/release/ship_pretrained.py", "--cards", "pbc", "lebc"]
+        + ["--check"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    card = (ROOT / "gripdem" / "inference" / "pretrained" / "pbc.md").read_text()
+    assert "64 node and 32 pair channels" in card  # from the file's hyperparameters

@@ -11,7 +11,7 @@ force halved, a peak shear rate of 500 1/s instead of 1000), generated once into
 cache (``--sims`` simulations of the default preset: train / val / test are different
 simulations). Per scene, ``python -m gripdem.run model.init_from=SOURCE`` runs
 
-- with today's settings (the fast preset's ``model.lr`` 2e-3, warm-up 0.05, its step budget of
+- with today's settings (the default preset's ``model.lr`` 2e-3, warm-up 0.05, its step budget of
   1820 steps; ``finetune.*=null``),
 - with the same learning rate at ``--steps`` steps,
 - with each candidate ``LR/WARMUP`` at ``--steps`` steps,

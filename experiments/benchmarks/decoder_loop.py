@@ -8,8 +8,8 @@ process: ``reference_forward`` (each head's own loop, one ``nn.GRU`` call per st
 and ``forward`` (every head at once, :mod:`gripdem.nn.stacked_gru`). Each row is one forward
 and backward pass (training's cost), the fastest of ``--repeats``, at the paper's shape: 2
 heads of 2 GRU layers, the graph-conv encoder's 32 features over ``history`` = 10 observed
-steps (the fast preset's history), state and output of the paper's sin/cos modes (6 channels),
-at the horizons of 190-10 and 100-100 and hidden 32 (the fast preset) and 350 (the paper).
+steps (the default preset's history), state and output of the paper's sin/cos modes (6 channels),
+at the horizons of 190-10 and 100-100 and hidden 32 (the default preset) and 350 (the paper).
 ``max |Δ|``: the largest difference between the two outputs and between their gradients,
 relative to the largest value (float32 round-off: identical outputs).
 """

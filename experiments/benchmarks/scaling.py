@@ -6,7 +6,7 @@
     python experiments/benchmarks/scaling.py --quick     # tiny scene: 400 and 1600 particles
 
 Three forms of the model, each the real :class:`~gripdem.models.module.TrajectoryModule` at
-the fast preset's widths (untrained: the same operations and time as trained):
+the default preset's widths (untrained: the same operations and time as trained):
 
 - ``sparse``: ``model=grip``, the paper's graph-conv encoder with the sparse graph operation
   (G_fixed + learned edge weights on the edge list; cut-off 3 d, ~107 neighbours);

@@ -3,6 +3,7 @@
     python experiments/release/ship_pretrained.py --run pbc=RUN_DIR lebc=RUN_DIR
         [--data pbc=DATA.h5 lebc=DATA.h5]
     python experiments/release/ship_pretrained.py --split-cards pbc lebc
+    python experiments/release/ship_pretrained.py --cards pbc lebc [--check]
 
 For each ``NAME=RUN_DIR`` (a ``python -m gripdem.run`` output folder) the run's data-only model
 file ``checkpoints/best.safetensors`` is loaded (format and weights checked), its card completed
@@ -15,6 +16,10 @@ it) and its split plan (which simulations trained, validated and tested it: from
 ``--split-cards NAME ...`` adds the split plan to shipped cards that predate it, in place (the
 same tensors): the plan the run made, rebuilt from the card (the data's sizes, the run's split,
 protocol and history) and the data config's defaults (fractions, explicit simulation lists).
+
+``--cards NAME ...`` rewrites ``NAME.md`` from the shipped file alone (card and hyperparameters;
+the file itself is not touched); with ``--check`` it writes nothing and fails, naming the file,
+when a ``NAME.md`` differs from what its model file says (a default-tier test runs it).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
@@ -83,9 +89,34 @@ def planned_split(card: dict) -> dict:
     return {key: summary[key] for key in SPLIT_KEYS if key in summary}
 
 
-def markdown_card(name: str, card: dict, size_bytes: int, n_weights: int) -> str:
+def encoder_text(encoder: dict) -> str:
+    """What the model's encoder is, from its hyperparameters (the shipped file's, not a
+    description written by hand)."""
+    from gripdem.models.module import encoder_options
+
+    options = encoder_options(encoder)
+    name = options.get("name", "graph_conv")
+    if name != "interaction":
+        return f"encoder {name}, {options.get('channels')} channels"
+    pair = options.get("pair_channels") or options.get("channels")
+    updates = "with" if options.get("edge_updates") else "no"
+    return (
+        f"encoder {name}: {options.get('channels')} node and {pair} pair channels, "
+        f"{options.get('rounds')} rounds, {options.get('edge_history')} relative-motion steps "
+        f"per pair, {updates} edge updates"
+    )
+
+
+def markdown_card(
+    name: str, card: dict, size_bytes: int, n_weights: int, hparams: dict | None = None
+) -> str:
     """The model card of ``pretrained:NAME`` for people."""
     run, metrics, data = card["run"], card["metrics"], card["training_data"]
+    encoder = (
+        encoder_text(dict(hparams["encoder"]))
+        if hparams and hparams.get("encoder")
+        else f"encoder {run.get('encoder')}, {run.get('channels')} channels"
+    )
     params = data["provenance"].get("parameters", {})
     scene_cfg, preset = params.get("scene", {}), params.get("preset", {})
     d = float(data["scene"]["diameter"])  # the training data's, as every model reads it
@@ -114,8 +145,8 @@ def markdown_card(name: str, card: dict, size_bytes: int, n_weights: int) -> str
         f"- split {card['split']} ({run.get('protocol')} protocol: train/validation/test by "
         f"simulation{split_sims(data.get('split'))}), history "
         f"{run.get('history_len')} frames, horizon {run.get('horizon')}",
-        f"- model `{run.get('model')}`: encoder {run.get('encoder')}, {run.get('channels')} "
-        f"channels, graph cut-off {run.get('graph_cutoff_d')} d, decoder "
+        f"- model `{run.get('model')}`: {encoder}, graph cut-off {run.get('graph_cutoff_d')} "
+        "d, decoder "
         f"{run.get('decoder_mode')}, frame {run.get('frame')}, seed {run.get('seed')}",
         f"- {int(metrics.get('steps', 0))} optimiser steps ({int(metrics.get('epochs', 0))} "
         f"epochs), lr {run.get('lr')} ({run.get('lr_schedule')}), "
@@ -143,12 +174,12 @@ def write_shipped(name: str, model, card: dict) -> Path:
     FOLDER.mkdir(parents=True, exist_ok=True)
     if isinstance(model, tuple):  # (hparams, state dict) of a shipped file: the same tensors
         save_model_file(model[0], target, card, state_dict=model[1], overwrite=True)
-        state = model[1]
+        hparams, state = model
     else:
         save_model_file(model, target, card, overwrite=True)
-        state = model.state_dict()
+        hparams, state = dict(model.hparams), model.state_dict()
     n_weights = sum(p.numel() for p in state.values())
-    text = markdown_card(name, card, target.stat().st_size, n_weights)
+    text = markdown_card(name, card, target.stat().st_size, n_weights, hparams)
     atomic_write_text(FOLDER / f"{name}.md", text, overwrite=True)
     print(f"wrote {target} ({target.stat().st_size / 1e6:.2f} MB) and {name}.md")
     return target
@@ -180,14 +211,46 @@ def split_card(name: str) -> Path:
     return write_shipped(name, (hparams, state), card)
 
 
+def card_text(name: str) -> str:
+    """``NAME.md`` as the shipped ``NAME.safetensors`` says it should read."""
+    path = FOLDER / f"{name}.safetensors"
+    hparams, state, card = read_model_file(path)
+    n_weights = sum(p.numel() for p in state.values())
+    return markdown_card(name, card, path.stat().st_size, n_weights, hparams)
+
+
+def cards(names: list[str], check: bool) -> int:
+    """Rewrite (or, with ``check``, compare) the ``.md`` cards of shipped models."""
+    stale = []
+    for name in names:
+        text, target = card_text(name), FOLDER / f"{name}.md"
+        if check:
+            if not target.exists() or target.read_text() != text:
+                stale.append(target)
+            continue
+        atomic_write_text(target, text, overwrite=True)
+        print(f"wrote {target}")
+    for target in stale:
+        print(
+            f"error: {target} differs from what {target.with_suffix('.safetensors').name} says; "
+            "run experiments/release/ship_pretrained.py --cards " + " ".join(names),
+            file=sys.stderr,
+        )
+    return 1 if stale else 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--run", nargs="+", default=[], metavar="NAME=RUN_DIR")
     parser.add_argument("--data", nargs="+", default=[], metavar="NAME=DATA.h5")
     parser.add_argument("--split-cards", nargs="+", default=[], metavar="NAME")
+    parser.add_argument("--cards", nargs="+", default=[], metavar="NAME")
+    parser.add_argument("--check", action="store_true", help="with --cards: compare only")
     args = parser.parse_args(argv)
+    if args.cards:
+        return cards(args.cards, args.check)
     if not args.run and not args.split_cards:
-        parser.error("give --run NAME=RUN_DIR ... or --split-cards NAME ...")
+        parser.error("give --run NAME=RUN_DIR ..., --split-cards NAME ... or --cards NAME ...")
     for name in args.split_cards:
         split_card(name)
     data = pairs(args.data, "--data")

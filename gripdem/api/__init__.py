@@ -15,32 +15,59 @@ model code; that happens when a model is loaded or a simulation runs.
 
 from __future__ import annotations
 
+import importlib
 import warnings
 from typing import Any
 
 from gripdem.api.coupling import Surrogate
 from gripdem.api.dem_physics import generate, physics
-from gripdem.api.model import Model, RolloutResult, load_model
+from gripdem.api.model import TRAINING, Model, load_model
+from gripdem.api.rollout_result import RolloutError, RolloutResult
 from gripdem.api.scene import Scene, Trajectory, read_trajectory, write_trajectory
+from gripdem.errors import (  # the exceptions: one base, GripdemError
+    CheckpointError,
+    DatasetError,
+    GenerationError,
+    GripdemError,
+    IncompatibleError,
+    RolloutDiverged,
+    SplitError,
+)
 
 __all__ = [
     "Model",
+    "PhysicsReport",
+    "RolloutError",
     "RolloutResult",
     "Scene",
     "Surrogate",
+    "TRAINING",
     "Trajectory",
     "generate",
     "load_model",
     "physics",
     "read_trajectory",
     "write_trajectory",
+    "CheckpointError",
+    "DatasetError",
+    "GenerationError",
+    "GripdemError",
+    "IncompatibleError",
+    "RolloutDiverged",
+    "SplitError",
 ]
+
+#: public names whose module imports torch: imported on first use
+LAZY = {"PhysicsReport": ("gripdem.evaluation.trajectory_physics", "TrajectoryPhysics")}
 
 #: deprecated name -> (its replacement in ``__all__``, the version that deprecated it)
 DEPRECATED: dict[str, tuple[str, str]] = {}
 
 
 def __getattr__(name: str) -> Any:
+    if name in LAZY:
+        module, attribute = LAZY[name]
+        return getattr(importlib.import_module(module), attribute)
     if name in DEPRECATED:
         new, since = DEPRECATED[name]
         warnings.warn(

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripdem.api.scene import Scene, Trajectory
+from gripdem.api.scene import Scene, Trajectory, check_frames
+from gripdem.errors import RolloutDiverged
 
 
 class Surrogate:
@@ -34,16 +35,23 @@ class Surrogate:
 
     def advance(self, frames: int = 1) -> np.ndarray:
         """Predict ``frames`` more frames and return them ``(frames, N, 3)`` (one simulation)
-        or ``(S, frames, N, 3)``, contact-corrected as kept. Raises ``FloatingPointError``
-        when the model predicts a non-finite position (nothing after it is kept)."""
+        or ``(S, frames, N, 3)``, contact-corrected as kept.
+
+        Raises:
+            ValueError: ``frames`` below 1.
+            RolloutDiverged: the model predicted NaN/Inf (as ``Model.rollout`` raises): its
+                ``partial`` holds the finite frames predicted before, nothing after them is
+                kept; hand a state back with ``set_state`` to go on."""
         frames = int(frames)
         if frames < 1:
             raise ValueError(f"frames: expected a positive number of frames, got {frames}")
         new = self._stepper.advance(frames)
         if self._stepper.stopped is not None:
-            raise FloatingPointError(
-                f"the surrogate stopped: {self._stepper.stopped}; {new.shape[1]} of {frames} "
-                "frames were predicted (hand a state back with set_state to go on)"
+            raise RolloutDiverged(
+                f"the model stopped: {self._stepper.stopped}; {new.shape[1]} of {frames} "
+                "frames were predicted (the exception's .partial holds them; hand a state "
+                "back with set_state to go on)",
+                partial=self._out(new),
             )
         return self._out(new)
 
@@ -69,25 +77,29 @@ class Surrogate:
 
     def set_state(self, frames: np.ndarray, times: np.ndarray | None = None) -> None:
         """Hand a state back: go on from ``frames`` (``(>= K+1, N, 3)`` or with a leading
-        ``S``; the last ``K + 1`` are read) at ``times`` (default: the current state's times
-        shifted so that the newest is the current newest). A link in progress is dropped and
-        the neighbour lists are rebuilt; timings keep accumulating."""
-        frames = np.asarray(frames, dtype=np.float64)
+        ``S``; the last ``K + 1`` are read) at ``times`` (default: the current state's times).
+        A link in progress is dropped and the neighbour lists are rebuilt; timings keep
+        accumulating. The state is checked as ``Model.rollout`` checks a history.
+
+        Raises:
+            ValueError: frames of another shape, simulation count or particle count than
+                the surrogate's, NaN/Inf, or times not one frame interval apart."""
         k1 = self._stepper.k + 1
-        if self._single:
-            frames = frames[None]
-        if frames.ndim != 4 or frames.shape[1] < k1:
+        sims, particles = self._stepper.frames.shape[0], self._stepper.frames.shape[2]
+        frames = np.asarray(frames, dtype=np.float64)
+        if frames.ndim != (3 if self._single else 4):
             raise ValueError(
                 f"set_state: expected frames ({'' if self._single else 'sims, '}>= {k1}, "
-                f"particles, 3), got {frames.shape[int(self._single) :]}"
+                f"particles, 3), got {frames.shape}"
             )
         if times is None:
-            times = self._stepper.times
-        else:
-            times = np.asarray(times, dtype=np.float64)
-            times = times[None] if self._single else times
-            times = times[:, -k1:]
-        self._stepper.set_state(frames[:, -k1:], times)
+            times = self._out(self._stepper.times)
+        checked, times, _ = check_frames("set_state", frames, times, self.scene, k1, particles)
+        if checked.shape[0] != sims:
+            raise ValueError(
+                f"set_state: expected {sims} simulations (the surrogate's), got {checked.shape[0]}"
+            )
+        self._stepper.set_state(checked, times)
 
     @property
     def frames_advanced(self) -> int:
@@ -112,5 +124,8 @@ class Surrogate:
         return self._stepper.precision
 
     def trajectory(self, frames: np.ndarray, times: np.ndarray) -> Trajectory:
-        """Frames you collected from ``advance`` as a ``Trajectory`` of this scene."""
+        """Frames you collected from ``advance`` as a ``Trajectory`` of this scene.
+
+        Raises:
+            ValueError: frames and times whose shapes do not match."""
         return Trajectory(frames, times, self.scene, provenance={"generator": "gripdem.api"})

@@ -8,6 +8,7 @@ from typing import Any
 
 from gripdem.api.scene import Trajectory
 from gripdem.config_files import config_dir
+from gripdem.errors import GenerationError
 
 #: validation checks that say whether data suits training, not whether the physics is sound: a
 #: warning here (a short single simulation may have no Lees-Edwards face crossing)
@@ -64,6 +65,11 @@ def generate(
 
     Returns:
         a ``Trajectory`` with velocities and the generator's provenance.
+
+    Raises:
+        ValueError: an unknown scene or preset (the known ones listed), or an option the
+            generator refuses (named: e.g. a volume fraction above random close packing).
+        GenerationError: ``validate`` and the data failed a plausibility check (named).
     """
     from gripdem.dem.config import GeneratorConfig
     from gripdem.dem.scenes import generate
@@ -94,11 +100,11 @@ def generate(
                 stacklevel=2,
             )
         if set(failed) - set(advisory):
-            raise RuntimeError(
+            raise GenerationError(
                 f"the generated data failed the validation checks "
                 f"{sorted(set(failed) - set(advisory))} (scene {scene!r}, preset {preset!r})"
             )
-    return Trajectory.from_data(data)
+    return Trajectory._from_data(data)
 
 
 def physics(
@@ -111,8 +117,10 @@ def physics(
     """The physics of simulation ``sim`` of ``trajectory``: g(r), contact coordination,
     overlaps, the mean-flow profile, the MSD and non-affine MSD against the lag and (from 1000
     frames) the self-diffusion coefficients; a
-    ``gripdem.evaluation.trajectory_physics.TrajectoryPhysics`` (``.table()`` prints
-    it)."""
+    ``PhysicsReport`` (``.table()`` prints it).
+
+    Raises:
+        ValueError: ``sim`` outside the trajectory, or lags longer than it."""
     from gripdem.evaluation.trajectory_physics import trajectory_physics
 
     if not 0 <= sim < trajectory.n_sims:

@@ -6,16 +6,20 @@ torch and the model code are imported by ``load_model``, not before.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from gripdem.api.scene import Scene, Trajectory
+from gripdem.api.rollout_result import RolloutResult
+from gripdem.api.scene import Scene, check_frames
+from gripdem.errors import RolloutDiverged
 
-#: time steps of history and prediction may differ from the scene's frame interval by this
-TIME_RTOL = 1e-4
+#: ``scene=TRAINING`` applies a model in the scene it was trained on (say so explicitly)
+TRAINING = "training"
+#: the release from which ``Model.rollout`` and ``Model.surrogate`` require ``scene``
+SCENE_REQUIRED_FROM = "0.2.0"
 
 
 def load_model(source: str | os.PathLike, device: str = "cpu", precision: str = "auto") -> Model:
@@ -25,74 +29,19 @@ def load_model(source: str | os.PathLike, device: str = "cpu", precision: str = 
     Files are read as data (safetensors with a JSON card; nothing is unpickled). ``device``:
     a torch device (``"cpu"``, ``"cuda"``). ``precision``: of the encoder, ``"auto"`` (the
     default of ``gripdem.predict``: bf16 where the device computes it natively, CPU
-    avx512_bf16/AMX or CUDA 8.0+, else fp32), ``"fp32"`` or ``"bf16"``."""
+    avx512_bf16/AMX or CUDA 8.0+, else fp32), ``"fp32"`` or ``"bf16"``.
+
+    Raises:
+        FileNotFoundError: no such file, or no shipped model of that ``pretrained:`` name.
+        CheckpointError: the file is not a gripdem model, its tensors do not fit its
+            hyperparameters, or it would run code when loaded (nothing in it is run).
+        ValueError: a ``precision`` that is not one of the above (when it is first used)."""
     from gripdem.inference.checkpoint import read_checkpoint
     from gripdem.inference.pretrained import resolve
 
     path = resolve(source)
     hparams, state, card = read_checkpoint(path)
     return Model(str(source), path, hparams, state, dict(card), device, precision)
-
-
-@dataclass
-class RolloutResult:
-    """A rollout: the observed frames, then the predicted ones.
-
-    Shapes: ``batch`` is ``()`` for a history of one simulation ``(frames, N, 3)`` and
-    ``(S,)`` for ``(S, frames, N, 3)``; with ``members > 1`` a members axis follows it.
-
-    Attributes:
-        positions: ``(*batch, n_observed + n_predicted, N, 3)`` wrapped, m, float64.
-        times: ``(*batch, n_observed + n_predicted)`` absolute, s.
-        n_observed: the observed frames at the start (the model's history, ``K + 1``).
-        scene: the scene rolled out in.
-        divergence: per predicted frame ``max_step_over_d``, ``escaped``, ``overlap``; the
-            first frame of each flag (``first``) and why it stopped early (``stopped``).
-        correction: per predicted frame the contact correction's counts
-            (``overlapping_before``, ``worst_overlap_before``, ``overlapping_after``,
-            ``rms_push_over_d``); empty lists without correction.
-        timings: seconds spent per part of the stepper (neighbour list, features, forward,
-            decode and wrap, correction, relaxation).
-        precision: the encoder's arithmetic used.
-        notes: what differs between the scene and the model's training scene.
-    """
-
-    positions: np.ndarray
-    times: np.ndarray
-    n_observed: int
-    scene: Scene
-    members: int = 1
-    divergence: dict[str, Any] = field(default_factory=dict)
-    correction: dict[str, list] = field(default_factory=dict)
-    timings: dict[str, float] = field(default_factory=dict)
-    precision: str = "fp32"
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def predicted(self) -> np.ndarray:
-        """The predicted frames only: ``(*batch, n_predicted, N, 3)``."""
-        return self.positions[..., self.n_observed :, :, :]
-
-    @property
-    def n_predicted(self) -> int:
-        """Frames predicted (fewer than asked only when the model produced NaN/Inf)."""
-        return self.positions.shape[-3] - self.n_observed
-
-    @property
-    def seconds_per_frame(self) -> float:
-        """Wall time of the stepper per predicted frame (all simulations together)."""
-        return sum(self.timings.values()) / max(self.n_predicted, 1)
-
-    def trajectory(self) -> Trajectory:
-        """The rollout as a ``Trajectory`` (rows: simulation-major, then members), to
-        write with ``gripdem.api.write_trajectory`` or to report with ``.physics()``."""
-        n, t = self.positions.shape[-2], self.positions.shape[-3]
-        return Trajectory(
-            self.positions.reshape(-1, t, n, 3),
-            self.times.reshape(-1, t),
-            self.scene,
-            provenance={"generator": "gripdem.api", "members": self.members},
-        )
 
 
 class Model:
@@ -115,7 +64,7 @@ class Model:
         self.device, self.precision = str(device), str(precision)
         self.history_len = int(hparams["history_len"])
         self.horizon = int(hparams["horizon"])
-        self.scene = Scene.from_model_scene(hparams["scene"])
+        self.scene = Scene._from_model_scene(hparams["scene"])
         self._modules: dict[Scene, Any] = {}
         self._notes: dict[tuple[Scene, int], list[str]] = {}
         self.is_ensemble = bool(self.module(self.scene).is_ensemble)
@@ -128,56 +77,54 @@ class Model:
         )
 
     def module(self, scene: Scene | None = None):
-        """The LightningModule (``gripdem.models.module.TrajectoryModule``) applied in
-        ``scene`` (default: the training scene), on the model's device, in eval mode."""
+        """Advanced: the ``torch.nn.Module`` (a Lightning module) applied in ``scene``
+        (default: the training scene), on the model's device, in eval mode.
+
+        Raises:
+            CheckpointError: the file's tensors do not fit its hyperparameters."""
         scene = self.scene if scene is None else scene
         if scene not in self._modules:
             from gripdem.inference.checkpoint import build_module, data_scene
 
-            meta = scene.to_meta(1, self.history_len + 1, 1)
+            meta = scene._to_meta(1, self.history_len + 1, 1)
             built = build_module(self.path, self.hparams, self._state, scene=data_scene(meta))
             self._modules[scene] = built.to(self.device).eval()
         return self._modules[scene]
 
     def check_scene(self, scene: Scene, particles: int) -> list[str]:
-        """Notes on how ``scene`` differs from the training scene; raises a ``ValueError``
-        naming the field when the model cannot be applied there."""
+        """Notes on how ``scene`` differs from the training scene (the rule of
+        ``docs/reference/rules.md``, as ``gripdem.predict`` applies it).
+
+        Raises:
+            IncompatibleError: the model cannot be applied there (named field, both values)."""
         from gripdem.inference.checkpoint import check_compatible
 
         key = (scene, int(particles))
         if key not in self._notes:  # the model file is read once per scene, not per call
-            meta = scene.to_meta(1, self.history_len + 1, particles, path="<scene in memory>")
+            meta = scene._to_meta(1, self.history_len + 1, particles, path="<scene in memory>")
             self._notes[key] = check_compatible(self.path, meta)[1]
         return list(self._notes[key])
 
-    def _history(self, history, times, scene: Scene):
-        """``(observed (S, K+1, N, 3), times (S, K+1), single)`` from the user's arrays."""
-        k1 = self.history_len + 1
-        positions = np.asarray(history, dtype=np.float64)
-        single = positions.ndim == 3
-        if single:
-            positions = positions[None]
-        if positions.ndim != 4 or positions.shape[-1] != 3 or positions.shape[1] < k1:
-            raise ValueError(
-                f"history: expected (frames >= {k1}, particles, 3) or (sims, frames, particles, "
-                f"3) positions (the model reads {k1} frames), got {np.shape(history)}"
+    def _scene(self, scene: Scene | str | None, method: str) -> Scene:
+        """The scene a call applies the model in: a ``Scene``, or ``"training"``."""
+        if scene is None:
+            warnings.warn(
+                f"Model.{method}() without scene= applies the model in its training scene; "
+                "pass the data's scene (scene=trajectory.scene) or scene='training' (scene "
+                f"is required from gripdem {SCENE_REQUIRED_FROM})",
+                DeprecationWarning,
+                stacklevel=3,
             )
-        if not np.isfinite(positions).all():
-            raise ValueError("history: positions must be finite (NaN or Inf found)")
-        if times is None:
-            times = scene.times(positions.shape[1])
-        times = np.asarray(times, dtype=np.float64)
-        times = np.broadcast_to(times, positions.shape[:2]) if times.ndim == 1 else times
-        if times.shape != positions.shape[:2]:
-            raise ValueError(f"times: expected {positions.shape[:2]}, got {np.shape(times)}")
-        times = np.ascontiguousarray(times[:, -k1:])
-        steps = np.diff(times, axis=1)
-        if not np.allclose(steps, scene.frame_interval, rtol=TIME_RTOL, atol=0.0):
+            return self.scene
+        if isinstance(scene, str):
+            if scene != TRAINING:
+                raise ValueError(f"scene: expected a Scene or {TRAINING!r}, got {scene!r}")
+            return self.scene
+        if not isinstance(scene, Scene):
             raise ValueError(
-                f"times: the last {k1} frames must be {scene.frame_interval:.6g} s apart (the "
-                f"scene's frame_interval), got steps {steps.min():.6g}..{steps.max():.6g} s"
+                f"scene: expected a gripdem Scene or {TRAINING!r}, got {type(scene).__name__}"
             )
-        return np.ascontiguousarray(positions[:, -k1:]), times, single
+        return scene
 
     def _settings(self, correction, contact_distance, link, precision):
         from gripdem.inference.stepper import StepperSettings
@@ -195,7 +142,7 @@ class Model:
         times: np.ndarray | None = None,
         *,
         frames: int | None = None,
-        scene: Scene | None = None,
+        scene: Scene | str | None = None,
         members: int = 1,
         seed: int | None = None,
         correction: bool = True,
@@ -213,8 +160,9 @@ class Model:
                 ``scene.times(frames)`` (0, dt, 2 dt, ...).
             frames: frames to predict; beyond the horizon the model's own predictions become
                 its history.
-            scene: where it is applied (default the training scene); a scene beyond 1 % of
-                the training scene is refused with the field named.
+            scene: where it is applied: the data's ``Scene`` (``trajectory.scene``), or
+                ``"training"`` for the model's training scene. Omitting it still means the
+                training scene, with a ``DeprecationWarning`` (required from 0.2.0).
             members: samples of an ensemble model per simulation (1 for a deterministic one).
             seed: of the ensemble's noise (the same seed, the same members).
             correction: push overlapping particles apart after every frame (the stable
@@ -227,13 +175,22 @@ class Model:
         Returns:
             a ``RolloutResult``; identical to ``python -m gripdem.predict`` on the same
             frames (both use ``gripdem.inference.rollout.rollout``).
+
+        Raises:
+            ValueError: a history, times, ``frames``, ``members`` or ``scene`` that is not
+                as described (the argument named).
+            IncompatibleError: a scene the model cannot be applied in (field named).
+            RolloutDiverged: the model predicted NaN/Inf; its ``partial`` is the
+                ``RolloutResult`` of the frames before (``Surrogate.advance`` raises the same).
         """
         from gripdem.inference.rollout import OVERLAP_MARGIN, rollout
 
-        scene = self.scene if scene is None else scene
-        observed, obs_times, single = self._history(history, times, scene)
+        scene = self._scene(scene, "rollout")
+        observed, obs_times, single = check_frames(
+            "history", history, times, scene, self.history_len + 1
+        )
         notes = self.check_scene(scene, observed.shape[2])
-        meta = scene.to_meta(len(observed), observed.shape[1], observed.shape[2])
+        meta = scene._to_meta(len(observed), observed.shape[1], observed.shape[2])
         settings = self._settings(correction, contact_distance, link, precision)
         frames = self.horizon if frames is None else int(frames)
         if frames < 1:
@@ -254,7 +211,7 @@ class Model:
         batch += (run.members,) if run.members > 1 else ()
         div = run.divergence
         report = run.stepper.report
-        return RolloutResult(
+        result = RolloutResult(
             positions=run.positions.reshape(batch + run.positions.shape[1:]),
             times=run.times.reshape(batch + run.times.shape[1:]),
             n_observed=run.n_observed,
@@ -272,14 +229,22 @@ class Model:
             timings=dict(run.stepper.seconds),
             precision=run.stepper.precision,
             notes=notes,
+            model=str(self.source),
         )
+        if div.stopped is not None:
+            raise RolloutDiverged(
+                f"the model stopped: {div.stopped}; {result.n_predicted} of {frames} frames "
+                "were predicted (the exception's .partial holds them)",
+                partial=result,
+            )
+        return result
 
     def surrogate(
         self,
         history: np.ndarray,
         times: np.ndarray | None = None,
         *,
-        scene: Scene | None = None,
+        scene: Scene | str | None = None,
         correction: bool = True,
         contact_distance: float = 1.0,
         link: int | None = None,
@@ -287,11 +252,17 @@ class Model:
     ):
         """A ``Surrogate`` started from ``history`` (arguments as
         ``rollout``): advance it frame by frame from your own code, read its state, hand
-        a state back, read its timings."""
+        a state back, read its timings.
+
+        Raises:
+            ValueError: a history, times or ``scene`` that is not as described.
+            IncompatibleError: a scene the model cannot be applied in (field named)."""
         from gripdem.api.coupling import Surrogate
 
-        scene = self.scene if scene is None else scene
-        observed, obs_times, single = self._history(history, times, scene)
+        scene = self._scene(scene, "surrogate")
+        observed, obs_times, single = check_frames(
+            "history", history, times, scene, self.history_len + 1
+        )
         notes = self.check_scene(scene, observed.shape[2])
         settings = self._settings(correction, contact_distance, link, precision)
         return Surrogate(self.module(scene), scene, observed, obs_times, settings, single, notes)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -104,7 +105,10 @@ class Scene:
         frame_interval: float,
         body_force_amplitude: float = 0.0,
     ) -> Scene:
-        """The scene of a ``gripdem.boundary.Boundary`` and the particles' numbers."""
+        """The scene of a ``gripdem.boundary.Boundary`` and the particles' numbers.
+
+        Raises:
+            ValueError: a number the scene refuses (named)."""
         attrs = boundary.to_attrs()
         return cls(
             box=tuple(float(v) for v in attrs["box"]),
@@ -120,26 +124,31 @@ class Scene:
     @classmethod
     def from_file(cls, path: str | os.PathLike) -> Scene:
         """The scene of a gripdem HDF5 dataset (its attributes; the frame interval from its
-        times), checked as every reader checks it."""
+        times), checked as every reader checks it.
+
+        Raises:
+            FileNotFoundError: no such file.
+            DatasetError: a missing or bad field (named)."""
         from gripdem.data.dataset_io import read_meta
 
-        return cls.from_meta(read_meta(path))
+        return cls._from_meta(read_meta(path))
 
     @classmethod
-    def from_meta(cls, meta: DatasetMeta) -> Scene:
+    def _from_meta(cls, meta: DatasetMeta) -> Scene:
         """The scene of a dataset's ``DatasetMeta``."""
         return cls.from_boundary(
             meta.boundary, meta.diameter, meta.frame_interval, meta.body_force_amplitude
         )
 
     @classmethod
-    def from_model_scene(cls, scene: dict[str, Any]) -> Scene:
+    def _from_model_scene(cls, scene: dict[str, Any]) -> Scene:
         """The scene a model file records (its ``scene`` hyperparameter)."""
         names = {f.name for f in fields(cls)}
         return cls(**{k: v for k, v in scene.items() if k in names})
 
     def to_boundary(self) -> Boundary:
-        """The ``gripdem.boundary.Boundary`` of this scene (box and Lees-Edwards)."""
+        """The ``gripdem.boundary.Boundary`` of this scene (box and Lees-Edwards): the
+        conventions package (minimum image, wrapping, offsets). Raises nothing of its own."""
         from gripdem.boundary import Boundary, Box, LeesEdwards
 
         box = Box(*self.box)
@@ -147,7 +156,7 @@ class Scene:
             return Boundary(box)
         return Boundary(box, LeesEdwards(self.shear_rate, self.le_sign, self.le_time_origin))
 
-    def to_meta(self, sims: int, frames: int, particles: int, path: str = "<in memory>"):
+    def _to_meta(self, sims: int, frames: int, particles: int, path: str = "<in memory>"):
         """A ``DatasetMeta`` of arrays of these sizes in this scene."""
         from gripdem.data.schema import DatasetMeta
 
@@ -165,7 +174,8 @@ class Scene:
         )
 
     def matches(self, other: Scene, rtol: float = SAME_SCENE_RTOL) -> bool:
-        """Whether ``other`` describes the same scene (every number within ``rtol``)."""
+        """Whether ``other`` describes the same scene (every number within ``rtol``). Raises
+        nothing of its own."""
         for f in fields(self):
             a, b = getattr(self, f.name), getattr(other, f.name)
             if isinstance(a, str):
@@ -176,15 +186,20 @@ class Scene:
         return True
 
     def offsets(self, times: np.ndarray) -> np.ndarray:
-        """The float64 Lees-Edwards offsets delta (m) at ``times`` (zeros if periodic)."""
+        """The float64 Lees-Edwards offsets delta (m) at ``times`` (zeros if periodic), from
+        the absolute times (docs/spec/conventions.md#le-offset). Raises nothing of its own."""
         return self.to_boundary().offset(np.asarray(times, dtype=np.float64))
 
     def times(self, frames: int, start: float = 0.0) -> np.ndarray:
-        """``(frames,)`` equidistant frame times from ``start`` (s), float64."""
+        """``(frames,)`` equidistant frame times from ``start`` (s), float64. Raises nothing
+        of its own."""
         return float(start) + self.frame_interval * np.arange(int(frames), dtype=np.float64)
 
     def with_(self, **changes: Any) -> Scene:
-        """A copy with some numbers changed (checked again)."""
+        """A copy with some numbers changed (checked again).
+
+        Raises:
+            ValueError: a changed number the scene refuses (named)."""
         return replace(self, **changes)
 
 
@@ -242,7 +257,7 @@ class Trajectory:
         return self.positions.shape[2]
 
     @classmethod
-    def from_data(cls, data: TrajectoryData, scene: Scene | None = None) -> Trajectory:
+    def _from_data(cls, data: TrajectoryData, scene: Scene | None = None) -> Trajectory:
         """From the in-memory form of the HDF5 format
         (``gripdem.data.schema.TrajectoryData``); ``scene`` default: its own, with the
         frame interval a file reader takes (the median step, checked equidistant)."""
@@ -255,7 +270,7 @@ class Trajectory:
             )
         return cls(data.positions, data.times, scene, data.velocities, dict(data.provenance))
 
-    def to_data(self) -> TrajectoryData:
+    def _to_data(self) -> TrajectoryData:
         """The in-memory form of the HDF5 format."""
         from gripdem.data.schema import TrajectoryData
 
@@ -270,19 +285,104 @@ class Trajectory:
         )
 
 
+#: the release that removes the deprecated aliases below
+ALIASES_REMOVED_IN = "0.2.0"
+
+
+def _deprecated_alias(cls: type, name: str) -> None:
+    """Keep ``cls.name`` working for one release as an alias of the internal ``cls._name``
+    (it takes or returns internal types), warning with a ``DeprecationWarning``."""
+    internal = cls.__dict__[f"_{name}"]
+    kind = type(internal)
+    function = internal.__func__ if isinstance(internal, classmethod) else internal
+
+    def alias(*args, **kwargs):
+        warnings.warn(
+            f"{cls.__name__}.{name} is internal (it uses gripdem's internal types) and is "
+            f"deprecated: it will be removed in gripdem {ALIASES_REMOVED_IN}",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return function(*args, **kwargs)
+
+    alias.__name__ = name
+    alias.__doc__ = f"Deprecated (removed in {ALIASES_REMOVED_IN}): internal."
+    setattr(cls, name, kind(alias) if kind is classmethod else alias)
+
+
+for _name in ("from_meta", "to_meta", "from_model_scene"):
+    _deprecated_alias(Scene, _name)
+for _name in ("from_data", "to_data"):
+    _deprecated_alias(Trajectory, _name)
+
+
+def check_frames(
+    name: str, frames, times, scene: Scene, k1: int, particles: int | None = None
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The last ``k1`` frames of one ``(frames, N, 3)`` or ``(S, frames, N, 3)`` array and their
+    times, checked as every entry point checks a history (``Model.rollout``,
+    ``Model.surrogate``, ``Surrogate.set_state``): ``(frames (S, k1, N, 3), times (S, k1),
+    single)``. ``times`` None: ``scene.times`` (0, dt, 2 dt, ...).
+
+    Raises:
+        ValueError: naming ``name``: the wrong shape or particle count, too few frames,
+            NaN/Inf, times of another shape or not one frame interval apart."""
+    from gripdem.data.schema import TIME_RTOL
+
+    positions = np.asarray(frames, dtype=np.float64)
+    single = positions.ndim == 3
+    if single:
+        positions = positions[None]
+    if positions.ndim != 4 or positions.shape[-1] != 3 or positions.shape[1] < k1:
+        raise ValueError(
+            f"{name}: expected (frames >= {k1}, particles, 3) or (sims, frames, particles, "
+            f"3) positions (the model reads {k1} frames), got {np.shape(frames)}"
+        )
+    if particles is not None and positions.shape[2] != particles:
+        raise ValueError(
+            f"{name}: expected {particles} particles (the surrogate's), got {positions.shape[2]}"
+        )
+    if not np.isfinite(positions).all():
+        raise ValueError(f"{name}: positions must be finite (NaN or Inf found)")
+    if times is None:
+        times = scene.times(positions.shape[1])
+    times = np.asarray(times, dtype=np.float64)
+    times = np.broadcast_to(times, positions.shape[:2]) if times.ndim == 1 else times
+    if times.shape != positions.shape[:2]:
+        raise ValueError(f"times: expected {positions.shape[:2]}, got {np.shape(times)}")
+    times = np.ascontiguousarray(times[:, -k1:])
+    steps = np.diff(times, axis=1)
+    if not np.isfinite(times).all() or not np.allclose(
+        steps, scene.frame_interval, rtol=TIME_RTOL, atol=0.0
+    ):
+        raise ValueError(
+            f"times: the last {k1} frames must be {scene.frame_interval:.6g} s apart (the "
+            f"scene's frame_interval), got steps {steps.min():.6g}..{steps.max():.6g} s"
+        )
+    return np.ascontiguousarray(positions[:, -k1:]), times, single
+
+
 def read_trajectory(path: str | os.PathLike) -> Trajectory:
     """Read a gripdem HDF5 dataset into memory (checked: every bad field is a clear error).
-    Its scene is ``Scene.from_file``'s, the one ``gripdem.predict`` applies a model in."""
+    Its scene is ``Scene.from_file``'s, the one ``gripdem.predict`` applies a model in.
+
+    Raises:
+        FileNotFoundError: no such file.
+        DatasetError: a missing or bad field (named, with what was expected)."""
     from gripdem.data.dataset_io import read_dataset
 
-    return Trajectory.from_data(read_dataset(path), Scene.from_file(path))
+    return Trajectory._from_data(read_dataset(path), Scene.from_file(path))
 
 
 def write_trajectory(
     path: str | os.PathLike, trajectory: Trajectory, overwrite: bool = False
 ) -> Path:
     """Write ``trajectory`` as a gripdem HDF5 dataset, validated first and written atomically
-    (an existing file is kept unless ``overwrite``); returns the path."""
+    (an existing file is kept unless ``overwrite``); returns the path.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is False (nothing written).
+        DatasetError: the arrays cannot form a valid dataset (named field; nothing written)."""
     from gripdem.data.dataset_io import write_dataset
 
-    return write_dataset(path, trajectory.to_data(), overwrite=overwrite)
+    return write_dataset(path, trajectory._to_data(), overwrite=overwrite)

@@ -24,7 +24,6 @@ expected.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,6 +35,7 @@ from gripdem.boundary import (
     Boundary,
     Box,
 )
+from gripdem.errors import DatasetError
 
 FORMAT_NAME = "gripdem"
 FORMAT_VERSION = 1
@@ -44,16 +44,6 @@ TIME_RTOL = 1e-4
 #: positions may lie this fraction of the box length outside [-l/2, l/2) (rounding, writers
 #: that wrap to (-l/2, l/2])
 POSITION_RTOL = 1e-6
-
-
-class DatasetError(ValueError):
-    """Bad trajectory data: the message names the file, the field and the expectation."""
-
-    def __init__(self, path: str | os.PathLike | None, field_name: str, message: str):
-        self.path = None if path is None else str(path)
-        self.field = field_name
-        where = "<in memory>" if path is None else str(path)
-        super().__init__(f"{where}: field '{field_name}': {message}")
 
 
 @dataclass

@@ -1,7 +1,8 @@
 """Split windows: the `h-f` split, history truncation and the window index.
 
-A split ``h-f`` means up to ``h`` input velocities and ``f`` predicted frames (SPEC §4). The model
-reads ``history_len = K <= h`` velocities, so one window spans ``K + 1 + f`` frames::
+A split ``h-f`` means up to ``h`` input velocities and ``f`` predicted frames
+(docs/spec/protocols.md#splits). The model reads ``history_len = K <= h`` velocities, so one window
+spans ``K + 1 + f`` frames::
 
     frames  start ... start+K | start+K+1 ... start+K+f
             K+1 input frames  | f target frames
@@ -22,12 +23,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from gripdem.errors import SplitError
+
 #: the paper's splits (h-f); a 201-frame simulation holds exactly one full-history window of each
 PAPER_SPLITS = ("190-10", "180-20", "150-50", "100-100")
-
-
-class SplitError(ValueError):
-    """A split, history length or protocol that does not fit the data (message says what fits)."""
 
 
 # --------------------------------------------------------------------------------------------

@@ -18,11 +18,12 @@ from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.params import GENERATOR_VERSION
 from gripdem.dem.scenes import generate
 from gripdem.dem.validation import validate_trajectories, write_report
+from gripdem.errors import GenerationError
 
 log = logging.getLogger(__name__)
 
 
-class ValidationFailed(RuntimeError):
+class ValidationFailed(GenerationError):
     """The generated data failed a plausibility check; the report says which."""
 
     def __init__(self, report: dict[str, Any], report_path: Path):

@@ -4,8 +4,10 @@ A checkpoint of :class:`~gripdem.models.module.TrajectoryModule` holds in its hy
 the scene it was trained on (box, boundary, shear rate, LE sign and time origin, diameter,
 frame interval), the encoding, the normaliser, the history length and horizon, the graph
 cut-off and the fitted linear AR baseline. :func:`check_compatible` decides whether a dataset
-is a scene the model can be applied to, and refuses the rest with an
-:class:`IncompatibleError` naming the data file, the field and the checkpoint:
+is a scene the model can be applied to as it is (``purpose="apply"``: ``predict``, the Python
+API) or fine-tuned on (``purpose="finetune"``: the runner's ``model.init_from``), and refuses
+the rest with an :class:`IncompatibleError` naming the data file, the field and the checkpoint.
+The rule is stated once for users in ``docs/reference/rules.md``; applied as it is:
 
 - the same boundary kind, and in a sheared box the same flow direction (sign of the signed
   shear rate);
@@ -46,6 +48,7 @@ import torch
 from gripdem._version import __version__
 from gripdem.data.encodings import ENCODINGS
 from gripdem.data.schema import DatasetMeta
+from gripdem.errors import IncompatibleError
 from gripdem.inference.model_file import (
     CheckpointError,
     build_module,
@@ -63,6 +66,8 @@ __all__ = [
     "CheckpointError",
     "IncompatibleError",
     "SPLIT_KEYS",
+    "FINETUNE_BEYOND",
+    "PURPOSES",
     "check_compatible",
     "export_run_model",
     "training_data_card",
@@ -71,13 +76,6 @@ __all__ = [
     "read_checkpoint",
     "read_hparams",
 ]
-
-
-class IncompatibleError(ValueError):
-    """A checkpoint that cannot be applied to a dataset: names the data, field and checkpoint."""
-
-    def __init__(self, data: Path, checkpoint: Path, field: str, message: str):
-        super().__init__(f"{data}: field '{field}': {message} (checkpoint {checkpoint})")
 
 
 def _check_zip(path: Path) -> None:
@@ -244,20 +242,50 @@ def _relative_only(hp: dict[str, Any], sheared: bool) -> bool:
     )
 
 
-def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], list[str]]:
-    """The checkpoint's hyperparameters if it can be applied to ``meta``'s data, and notes on
-    what differs within the tolerance; raises :class:`IncompatibleError` otherwise.
+#: what a model is used for on other data: applied as it is (``predict``, the Python API, a
+#: surrogate run) or fine-tuned on it (``model.init_from``)
+PURPOSES = ("apply", "finetune")
+#: why a scene beyond the tolerance is accepted for fine-tuning
+FINETUNE_BEYOND = (
+    "fine-tuning adapts the model to this scene (its as-it-is test row lies outside its "
+    "training scene)"
+)
 
-    Box, diameter, frame interval, shear rate and body-force amplitude may differ from the
-    training scene's by :data:`~gripdem.inference.scene_match.SCENE_TOLERANCE` (1 %): every
-    model reads dimensionless inputs, and within 1 % of the training scene they move less than
-    between two simulations of that scene (:mod:`gripdem.inference.scene_match` says which
-    input depends on which parameter). Each difference is a note; beyond the tolerance the
-    field is refused with both values. Always refused: another boundary kind, the opposite
-    flow direction, the dense n x n graph at another particle count."""
+
+def check_compatible(
+    checkpoint, meta: DatasetMeta, purpose: str = "apply"
+) -> tuple[dict[str, Any], list[str]]:
+    """The checkpoint's hyperparameters if it can be used on ``meta``'s data for ``purpose``,
+    and notes on what differs from its training scene; raises :class:`IncompatibleError`
+    otherwise. The one rule for a model on other data (``docs/reference/rules.md``), called by
+    ``gripdem.predict``, the Python API and the runner's fine-tuning alike.
+
+    ``purpose="apply"`` (the model as it is): box, diameter, frame interval, shear rate and
+    body-force amplitude may differ from the training scene's by
+    :data:`~gripdem.inference.scene_match.SCENE_TOLERANCE` (1 %): every model reads
+    dimensionless inputs, and within 1 % of the training scene they move less than between two
+    simulations of that scene (:mod:`gripdem.inference.scene_match` says which input depends on
+    which parameter). Each difference is a note; beyond the tolerance the field is refused
+    with both values (the exception: exact-frame ``grip`` models of a sheared scene without
+    x-position features read relative geometry only and are applied in any box).
+
+    ``purpose="finetune"`` (``model.init_from``): the same parameters may differ by any
+    amount, each difference beyond the tolerance noted; fine-tuning is how a model reaches
+    another scene.
+
+    Always refused, for either purpose: an unknown encoding, another boundary kind, the
+    opposite flow direction, the dense n x n graph at another particle count.
+
+    :raises IncompatibleError: (a ``ValueError``) naming the data file, the field, both values
+        and the checkpoint.
+    :raises CheckpointError: the checkpoint cannot be read safely.
+    :raises ValueError: ``purpose`` is not one of :data:`PURPOSES`."""
+    if purpose not in PURPOSES:
+        raise ValueError(f"purpose={purpose!r}: expected one of {PURPOSES}")
     checkpoint = Path(checkpoint)
     hp = read_hparams(checkpoint)
     scene, data, notes = hp["scene"], data_scene(meta), []
+    finetune = FINETUNE_BEYOND if purpose == "finetune" else None
 
     def fail(field: str, message: str) -> IncompatibleError:
         return IncompatibleError(meta.path, checkpoint, field, message)
@@ -275,10 +303,10 @@ def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], lis
             f"{data['boundary']!r}",
         )
     for key in ("diameter", "frame_interval"):
-        add(compare(key, float(scene[key]), float(data[key]), fail))
+        add(compare(key, float(scene[key]), float(data[key]), fail, beyond_ok=finetune))
     if "body_force_amplitude" in scene:
         key = "body_force_amplitude"
-        add(compare(key, float(scene[key]), float(data[key]), fail))
+        add(compare(key, float(scene[key]), float(data[key]), fail, beyond_ok=finetune))
     sheared = data["boundary"] == "lees_edwards"
     if sheared:
         trained = float(scene["le_sign"]) * float(scene["shear_rate"])
@@ -290,7 +318,7 @@ def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], lis
                 f"shear_rate), the data has {given:+.6g} (opposite flow directions: mirror the "
                 "data's z axis, or convert it with the other --le-sign)",
             )
-        add(compare("shear_rate", trained, given, fail))
+        add(compare("shear_rate", trained, given, fail, beyond_ok=finetune))
         if not _close(float(scene["le_time_origin"]), float(data["le_time_origin"]), 1e-12):
             notes.append(
                 f"LE time origin: the data's {data['le_time_origin']:.6g} is used (the model "
@@ -303,7 +331,7 @@ def check_compatible(checkpoint, meta: DatasetMeta) -> tuple[dict[str, Any], lis
             [float(v) for v in scene["box"]],
             [float(v) for v in data["box"]],
             fail,
-            beyond_ok="this model reads relative geometry only" if relative else None,
+            beyond_ok="this model reads relative geometry only" if relative else finetune,
             why=(
                 f"this model ({hp['encoding']} encoding, {hp.get('decoder_mode')} decoder, "
                 f"{data['boundary']}) depends on the box (volume fraction, drive wavelength); "

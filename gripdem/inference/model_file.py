@@ -35,6 +35,7 @@ import torch
 
 from gripdem._version import __version__
 from gripdem.data.h5io import atomic_path
+from gripdem.errors import CheckpointError
 
 FORMAT = "gripdem-model"
 FORMAT_VERSION = 1
@@ -43,14 +44,6 @@ REQUIRED_HPARAMS = ("scene", "normalizer", "encoding", "horizon")
 #: a safetensors JSON header larger than this is refused before it is read (the library's own
 #: limit is 100 MB)
 MAX_HEADER_BYTES = 100 << 20
-
-
-class CheckpointError(ValueError):
-    """A checkpoint or model file that cannot be loaded (safely): names file, field, finding."""
-
-    def __init__(self, path: str | os.PathLike, field: str, message: str):
-        self.path, self.field = str(path), field
-        super().__init__(f"{path}: field '{field}': {message}")
 
 
 def plain(value: Any, where: str = "hparams") -> Any:

@@ -18,7 +18,7 @@ from enum import Enum
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf import MISSING, DictConfig, OmegaConf, open_dict
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +123,9 @@ class ModelSchema:
     layers: int = 2
     n_heads: int = 2
     decoder_dropout: float = 0.0
-    fast_steps: int = 1820
+    train_steps: int = 1820
+    # deprecated name of train_steps (until 0.2.0): when set, it replaces train_steps
+    fast_steps: Optional[int] = None
     lr: float = 1e-4
     weight_decay: float = 0.0
     lr_schedule: LrSchedule = LrSchedule.constant
@@ -242,6 +244,7 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
         finally:
             log.disabled = previous
         return
+    apply_deprecated_names(cfg)
     mode = str(cfg.model.decoder_mode.value)
     boundary = cfg.scene.get("boundary")
     if cfg.data.encoding != cfg.model.encoding:
@@ -291,6 +294,31 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
+
+
+#: renamed options: old name -> (new name, the release that removes the old one)
+RENAMED = {
+    "experiment=fast": ("experiment=default", "0.2.0"),
+    "model.fast_steps": ("model.train_steps", "0.2.0"),
+}
+
+
+def apply_deprecated_names(cfg: DictConfig) -> list[str]:
+    """Old option names still work for one release: each used one prints one line naming its
+    replacement (``RENAMED``), and ``model.fast_steps`` is carried over to ``train_steps``.
+    Returns the old names found."""
+    found = []
+    if hydra_choices(cfg).get("experiment") == "fast":
+        found.append("experiment=fast")
+    if cfg.model.get("fast_steps") is not None:
+        found.append("model.fast_steps")
+        with open_dict(cfg):
+            cfg.model.train_steps = int(cfg.model.fast_steps)
+            cfg.model.fast_steps = None
+    for old in found:
+        new, removed = RENAMED[old]
+        log.warning("%s is deprecated: use %s (the old name goes in gripdem %s)", old, new, removed)
+    return found
 
 
 def hydra_choices(cfg: DictConfig) -> dict[str, str]:

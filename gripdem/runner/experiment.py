@@ -31,6 +31,8 @@ from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.h5io import atomic_write_text
 from gripdem.dem.output import ensure_scene_dataset
 from gripdem.inference.checkpoint import (
+    FINETUNE_BEYOND,
+    check_compatible,
     data_scene,
     export_run_model,
     load_checkpoint_model,
@@ -230,9 +232,12 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
         tuned = "model (fine-tuned)"
         if metrics.get("finetune/kept_start"):
             tuned = "model (the start: training did not beat it on validation)"
+        before = "before fine-tuning"
+        if metrics.get("finetune/start_outside_scene"):
+            before += " (outside its training scene)"
         names = [
             (tuned, "test/rmse", "test/crps"),
-            ("before fine-tuning", "before/test/rmse", "before/test/crps"),
+            (before, "before/test/rmse", "before/test/crps"),
         ]
     names += [(b, f"test/rmse_{b}", f"test/crps_{b}") for b in BASELINES]
     for name, key, crps in names:
@@ -276,7 +281,13 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     data_seconds = time.perf_counter() - run_started  # the built-in DEM, when not cached
     dm = build_datamodule(cfg, data_path)
     source = load_source(cfg)  # fine-tuning: start from a trained model (model.init_from)
+    outside = False  # the source's training scene is beyond the tolerance of this data's
     if source is not None:
+        # the rule for a model on other data, as predict and the API apply it
+        notes = check_compatible(cfg.model.init_from, dm.meta, purpose="finetune")[1]
+        for note in notes:
+            log.info("model.init_from=%s on %s: %s", cfg.model.init_from, dm.meta.path, note)
+        outside = any(FINETUNE_BEYOND in note for note in notes)
         dm.load_state_dict(
             {"normalizer": source.normalizer.to_dict(), "encoding": dm.encoding_name}
         )
@@ -331,6 +342,7 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
         metrics.update({f"before/{k}": v for k, v in before["metrics"].items()})
         metrics[f"finetune/start_{start.monitor.replace('/', '_')}"] = start.val_rmse
         metrics["finetune/kept_start"] = float(kept_start)
+        metrics["finetune/start_outside_scene"] = float(outside)
     metrics["val/rmse_best"] = float(best_score) if best_score is not None else math.nan
     metrics["train_seconds"] = train_seconds
     trained = trainer.lightning_module

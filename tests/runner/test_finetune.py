@@ -128,3 +128,87 @@ def test_fine_tuning_uses_its_own_optimiser_defaults():
     assert cfg.model.lr == cfg.finetune.lr < scratch.model.lr
     assert cfg.model.warmup_fraction == cfg.finetune.warmup_fraction
     assert scratch.model.lr == 2.0e-3  # a run from scratch keeps the preset's
+
+
+def _variant(source_path, path, **changes):
+    """A copy of a dataset with some fields changed (real HDF5, written atomically)."""
+    from dataclasses import replace
+
+    from gripdem.data.dataset_io import read_dataset, write_dataset
+
+    return write_dataset(path, replace(read_dataset(source_path), **changes))
+
+
+def test_one_rule_for_predict_the_api_and_fine_tuning(
+    tmp_path, monkeypatch, gripdem_data_root, source, tiny_pbc_path, tiny_lebc_path, capsys
+):
+    """docs/reference/rules.md: the same cases through ``gripdem.predict``, the Python API and
+    the runner's ``model.init_from``. Within 1 % of the training scene: applied with the same
+    note everywhere. Beyond it (here the drive halved): refused as it is by predict and the API
+    naming the field, accepted for fine-tuning with that note and the as-it-is row labelled.
+    Another boundary kind: refused by all three, before any training."""
+    import gripdem
+    from gripdem.boundary import Boundary, Box
+    from gripdem.data.dataset_io import read_dataset, read_meta
+    from gripdem.inference.checkpoint import FINETUNE_BEYOND, IncompatibleError, check_compatible
+    from gripdem.predict import main as predict
+
+    monkeypatch.setenv("GRIPDEM_DATA", str(gripdem_data_root))
+    data = read_dataset(tiny_pbc_path)
+    model = gripdem.load_model(source)
+    k1 = model.history_len + 1
+
+    def api(path):
+        trajectory = gripdem.read_trajectory(path)
+        return model.rollout(
+            trajectory.positions[0, :k1],
+            trajectory.times[0, :k1],
+            frames=1,
+            scene=trajectory.scene,
+        )
+
+    def cli(path, name):
+        out = tmp_path / f"{name}_pred.h5"
+        return predict([str(source), str(path), "--frames", "1", "--out", str(out)])
+
+    # within the tolerance: the same note from all three
+    close = _variant(
+        tiny_pbc_path,
+        tmp_path / "close.h5",
+        boundary=Boundary(Box(*(1.004 * data.box.lengths)), None),
+        positions=data.positions * 1.004,
+    )
+    applied = check_compatible(source, read_meta(close))[1]
+    assert len(applied) == 1 and applied[0].startswith("box: ") and "within the 1 %" in applied[0]
+    assert check_compatible(source, read_meta(close), purpose="finetune")[1] == applied
+    assert api(close).notes == applied
+    capsys.readouterr()
+    assert cli(close, "close") == 0 and f"note: {applied[0]}" in capsys.readouterr().out
+
+    # beyond it: refused as it is, naming the field; fine-tuned with a note
+    halved = _variant(
+        tiny_pbc_path, tmp_path / "halved.h5", body_force_amplitude=0.5 * data.body_force_amplitude
+    )
+    with pytest.raises(IncompatibleError, match="field 'body_force_amplitude'.*beyond the 1 %"):
+        api(halved)
+    assert cli(halved, "halved") == 1
+    assert "field 'body_force_amplitude'" in capsys.readouterr().err
+    notes = check_compatible(source, read_meta(halved), purpose="finetune")[1]
+    assert len(notes) == 1 and notes[0].endswith(FINETUNE_BEYOND)
+    out, report = run(
+        tmp_path, "halved_run", [f"model.init_from={source}", f"data.path={halved}", "data_seed=0"]
+    )
+    assert report["finetune/start_outside_scene"] == 1.0
+    assert "| before fine-tuning (outside its training scene) |" in capsys.readouterr().out
+
+    # another boundary kind: refused by all three
+    with pytest.raises(IncompatibleError, match="field 'boundary'"):
+        api(tiny_lebc_path)
+    assert cli(tiny_lebc_path, "lebc") == 1 and "field 'boundary'" in capsys.readouterr().err
+    with pytest.raises(IncompatibleError, match="field 'boundary'"):
+        run(
+            tmp_path,
+            "lebc_run",
+            [f"model.init_from={source}", f"data.path={tiny_lebc_path}", "scene=lebc"],
+        )
+    assert not (tmp_path / "lebc_run" / "checkpoints").exists()

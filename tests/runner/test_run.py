@@ -32,7 +32,7 @@ GROUPS = {
         "vct_paper_exact",
     ],
     "trainer": ["cpu", "gpu", "ddp"],
-    "experiment": ["smoke", "fast", "paper"],
+    "experiment": ["smoke", "default", "fast", "paper"],
     "hparams_search": ["optuna"],
     "hydra/launcher": ["local_parallel", "slurm"],
 }
@@ -79,7 +79,7 @@ def test_custom_split_and_defaults():
         "190-10",
         "interaction",
     )
-    assert default.data.history_len == 10  # experiment=fast is the default preset
+    assert default.data.history_len == 10  # experiment=default is the default preset
     # a step budget: one simulation of the user's gets as many updates as the default six
     # (the model's own: the lean interaction encoder takes twice the steps of the paper models)
     assert (default.trainer.max_steps, default.trainer.max_epochs) == (3640, -1)
@@ -102,7 +102,7 @@ def test_the_command_line_wins_over_a_preset_or_the_pair_is_refused_naming_both(
     assert (smoke.split.name, smoke.preset.name) == ("10-5", "tiny")
     assert compose_run(["experiment=smoke", "split.horizon=20"]).split.name == "10-20"
     assert compose_run(["experiment=smoke", "model.hidden=64"]).model.hidden == 64
-    assert compose_run(["experiment=fast", "data.history_len=20"]).data.history_len == 20
+    assert compose_run(["experiment=default", "data.history_len=20"]).data.history_len == 20
     assert compose_run(["experiment=smoke", "preset=default"]).preset.name == "default"
     too_long = compose_run(["experiment=smoke", "split=190-10"])
     assert too_long.split.name == "190-10"  # the command line's split, not the preset's
@@ -253,3 +253,26 @@ def test_a_short_horizon_model_is_tested_chained_over_the_split(
     with h5py.File(out / "predictions.h5") as h5:
         assert h5["pred_positions"].shape[1] == f
     assert math.isfinite(metrics["test/rmse_ratio_constant_velocity"])
+
+
+def test_renamed_options_keep_working_for_one_release_with_one_line(caplog):
+    """experiment=fast is experiment=default, model.fast_steps is model.train_steps: the old
+    names compose the same run and print one line naming the new name."""
+    from gripdem.runner.config_schema import RENAMED, apply_deprecated_names, check_combination
+
+    new, old = compose_run(["experiment=default"]), compose_run(["experiment=fast"])
+    strip = ("hydra",)
+    assert {k: v for k, v in old.items() if k not in strip} == {
+        k: v for k, v in new.items() if k not in strip
+    }
+    with caplog.at_level("WARNING"):
+        check_combination(old)
+    assert "experiment=fast is deprecated: use experiment=default" in caplog.text
+    caplog.clear()
+    renamed = compose_run(["model.fast_steps=7"])
+    with caplog.at_level("WARNING"):
+        assert apply_deprecated_names(renamed) == ["model.fast_steps"]
+    assert renamed.model.train_steps == 7 and renamed.trainer.max_steps == 7
+    assert "model.fast_steps is deprecated: use model.train_steps" in caplog.text
+    assert apply_deprecated_names(compose_run([])) == []  # the new names are quiet
+    assert set(RENAMED) == {"experiment=fast", "model.fast_steps"}

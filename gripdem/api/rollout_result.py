@@ -110,11 +110,11 @@ class RolloutResult:
 
         Raises:
             ValueError: ``truth`` of another shape, or with NaN/Inf."""
-        from gripdem.evaluation.metrics import position_residuals
+        from gripdem.evaluation.metrics import position_residuals, rmse_per_step
         from gripdem.models.baselines import constant_velocity
 
         batch = self.positions.shape[:-3]
-        sims = batch[:1] if self.members > 1 else batch
+        sims = batch[:-1] if self.members > 1 else batch  # the members axis comes last
         want = (*sims, self.n_predicted, *self.positions.shape[-2:])
         truth = np.asarray(truth, dtype=np.float64)
         if (
@@ -140,11 +140,7 @@ class RolloutResult:
         cv = constant_velocity(observed, offsets[:, :k1], offsets[:, k1:], box).numpy()
         baseline = position_residuals(cv, truth, box, offsets[:, k1:])
         d = self.scene.diameter
-
-        def per_frame(residuals):
-            return np.sqrt((residuals**2).sum(-1).mean(axis=(0, 2))) / d
-
-        return RolloutError(per_frame(model), per_frame(baseline), self.members)
+        return RolloutError(rmse_per_step(model) / d, rmse_per_step(baseline) / d, self.members)
 
 
 @dataclass

@@ -164,6 +164,8 @@ def test_ensemble_members_equal_predicts(tmp_path, le_file, le_ensemble_checkpoi
         run.positions.reshape(expected.positions.shape), expected.positions
     )
     assert run.trajectory().positions.shape == expected.positions.shape
+    error = run.error(data.positions[:2, window.stop : window.stop + 9])  # members pooled
+    assert error.per_frame_over_d.shape == (9,) and error.members == 3
 
 
 def test_the_surrogate_steps_hands_back_and_times(tiny_lebc_path):

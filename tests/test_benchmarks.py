@@ -71,7 +71,7 @@ def test_scaling_quick(run_script, tmp_path):
     run_script("benchmarks/scaling", "--json", str(tmp_path / "s.json"))
     rows = json.loads((tmp_path / "s.json").read_text())["rows"]
     forms = {r["op"] for r in rows if "seconds" in r}
-    assert forms == {"sparse", "dense", "interaction"}
+    assert forms == {"sparse", "dense", "contact"}
     assert {r["mode"] for r in rows} == {"inference", "train step"}
 
 

@@ -229,8 +229,8 @@ def test_the_readme_results_table_is_its_source_file():
     readme = (ROOT / "README.md").read_text()
     table = script.readme_table(script.SOURCE.read_text())
     stale = readme.replace(
-        "| pbc | 190-10 | grip (interaction) | 0.00242",
-        "| pbc | 190-10 | grip (interaction) | 0.00999",
+        "| pbc | 190-10 | grip (contact) | 0.00242",
+        "| pbc | 190-10 | grip (contact) | 0.00999",
     )
     assert stale != readme and script.replace_block(stale, table) == readme
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The accuracy sweep of the results (docs/explanation/results.md): default scenes, protocol sims,
-# seeds 0-2, the four paper splits, both scenes; the interaction model and the paper's models in
+# seeds 0-2, the four paper splits, both scenes; the contact model and the paper's models in
 # the exact frame.
 # Two jobs at a time, one thread each (2 cores). The paper's models train 2 epochs instead of
 # the preset's 5: their validation RMSE plateaus after the first epoch (measured at 190-10 lebc:
@@ -12,8 +12,8 @@ out=${1:-multirun/issue9}
 python=${PYTHON:-.venv/bin/python}
 common=(hydra/launcher=local_parallel torch_threads=1 seed=0,1,2 scene=pbc,lebc)
 for split in 190-10 180-20 150-50 100-100; do
-  "$python" -m gripdem.run -m "${common[@]}" split=$split model=interaction \
-    hydra.sweep.dir="$out/$split-interaction"
+  "$python" -m gripdem.run -m "${common[@]}" split=$split model=contact \
+    hydra.sweep.dir="$out/$split-contact"
   "$python" -m gripdem.run -m "${common[@]}" split=$split model=grip,pct,vct trainer.max_epochs=2 \
     hydra.sweep.dir="$out/$split-paper-models"
 done

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The decoder modes compared (docs/explanation/results.md#decoder-modes): grip, pct and vct on the
-# default encoder, decoder, prior and budget (they differ only in the mode; model=interaction is
+# default encoder, decoder, prior and budget (they differ only in the mode; model=contact is
 # grip under its own name), both scenes, the mission's two splits, seeds 0-2, with the default
 # parallel launcher (two one-thread jobs at a time on 2 cores: about 75 min there), then the
 # tables and figures:

@@ -70,7 +70,7 @@ def _split_key(split: str) -> tuple:
     return (SPLIT_ORDER.index(split), split) if split in SPLIT_ORDER else (99, split)
 
 
-MODEL_ORDER = ("interaction", "grip", "pct", "vct")
+MODEL_ORDER = ("contact", "grip", "pct", "vct")
 
 
 def _model_key(model: str) -> tuple:

@@ -1,4 +1,4 @@
-"""The interaction encoder's forward pass: what each lever costs, side by side in one process.
+"""The contact encoder's forward pass: what each lever costs, side by side in one process.
 
     python experiments/benchmarks/encoder_speed.py [--scene pbc] [--sizes 2000 32000]
         [--threads 1] [--repeats 5] [--chunks 2048 8192] [--json out.json]
@@ -35,7 +35,7 @@ from benchlib import fmt, machine_line, markdown_table, scene_dataset, set_threa
 from gripdem.boundary import lattice_continuous_steps, neighbour_pairs
 from gripdem.data.dataset_io import read_meta
 from gripdem.inference.precision import bf16_supported
-from gripdem.nn.interaction import ContactGraph, InteractionEncoder
+from gripdem.nn.contact import ContactEncoder, ContactGraph
 
 HISTORY = 10
 
@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> dict:
         ]
         for label, options, cutoff, chunk, half in rows_spec:
             torch.manual_seed(0)
-            encoder = InteractionEncoder(HISTORY, 0, edge_history=3, **options).eval()
+            encoder = ContactEncoder(HISTORY, 0, edge_history=3, **options).eval()
             key = (tuple(sorted(options.items(), key=str)), cutoff)
             encoder.edge_chunk = chunk
             if half:

@@ -135,7 +135,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         path = write_dataset(Path(tmp) / "bench.h5", data)
         dm = TrajectoryDataModule(
-            path, split=f"{args.frames - 11}-10", protocol="paper", encoding="vct", graph_cache_mb=0
+            path,
+            split=f"{args.frames - 11}-10",
+            protocol="in_sample",
+            encoding="vct",
+            graph_cache_mb=0,
         )
         dm.setup("fit")
         ds = dm.datasets["train"]

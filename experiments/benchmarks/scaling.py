@@ -1,6 +1,6 @@
 """Scaling: inference and one training step against particle count, history length and threads.
 
-    python experiments/benchmarks/scaling.py [--scene pbc] [--ops sparse dense interaction]
+    python experiments/benchmarks/scaling.py [--scene pbc] [--ops sparse dense contact]
         [--sizes 2000 4000 8000 16000 32000 64000] [--histories 10 50 190]
         [--threads 1 2] [--memory-budget-gb 8] [--max-seconds 120] [--json out.json]
     python experiments/benchmarks/scaling.py --quick     # tiny scene: 400 and 1600 particles
@@ -12,7 +12,7 @@ the default preset's widths (untrained: the same operations and time as trained)
   (G_fixed + learned edge weights on the edge list; cut-off 3 d, ~107 neighbours);
 - ``dense``: the same with ``model.encoder.trainable_graph=dense``: a learned n x n matrix per
   block beside G_fixed (the paper's form; O(n^2) memory and time);
-- ``interaction``: ``model=interaction``, the default (cut-off 1.3 d, ~9 neighbours).
+- ``contact``: ``model=contact``, the default (cut-off 1.3 d, ~9 neighbours).
 
 States are the scene's default dataset tiled along y and z (2000 x 2^m particles, the same
 neighbourhoods), windows built by the training code (:class:`WindowDataset`). Per case:
@@ -66,10 +66,10 @@ from gripdem.models.module import TrajectoryModule
 OPS = {
     "sparse": ["model=grip"],
     "dense": ["model=grip", "model.encoder.trainable_graph=dense"],
-    "interaction": ["model=interaction"],
+    "contact": ["model=contact"],
 }
 #: exponent of n in memory and time: the dense n x n matrices dominate at scale
-POWER = {"sparse": 1, "dense": 2, "interaction": 1}
+POWER = {"sparse": 1, "dense": 2, "contact": 1}
 
 
 def base_model(scene: str, data_path: Path, op: str, k: int, split: str) -> TrajectoryModule:
@@ -155,7 +155,7 @@ def sized_model(model: TrajectoryModule, meta, n: int) -> TrajectoryModule:
 def formula_bytes(op: str, n: int, k: int, train: bool, neighbours: float) -> float:
     """A first memory estimate before anything was measured (float32 activations; training
     keeps them for the backward pass, parameters add gradients and two Adam moments)."""
-    if op == "interaction":
+    if op == "contact":
         edges = n * neighbours
         act = 4.0 * (edges * 64 * 40 + n * 64 * 30 + n * k * 3 * 4)
     else:
@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> dict:
                 key = (op, k, t, train)
                 last = previous.get(key)
                 scale = None if last is None else (n / last["n"]) ** POWER[op]
-                neighbours = 107.0 if op != "interaction" else 9.0
+                neighbours = 107.0 if op != "contact" else 9.0
                 est_mem = (
                     formula_bytes(op, n, k, train, neighbours)
                     if last is None

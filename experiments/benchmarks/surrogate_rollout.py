@@ -267,7 +267,7 @@ def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     return report
 
 
-def quick_checkpoints(work: Path, model: str = "interaction") -> dict[str, Path]:
+def quick_checkpoints(work: Path, model: str = "contact") -> dict[str, Path]:
     out = {}
     for scene in ("pbc", "lebc"):
         run = train_run(

@@ -27,7 +27,7 @@ side in one process:
   encoder's ``--precision``, the fastest of ``--repeats``, per predicted frame, broken into
   the stepper's parts (neighbour list, features, forward pass, decoding, contact correction).
   Fastest of several: the least disturbed by other jobs on a shared machine (the means are in
-  the JSON). Without ``--checkpoint`` the model is the default model (``model=interaction``,
+  the JSON). Without ``--checkpoint`` the model is the default model (``model=contact``,
   default preset) untrained: the same operations and time as a trained one. A checkpoint's
   out-of-sample accuracy (190-10 RMSE / CV's, from its model card) is printed with it.
 
@@ -277,7 +277,7 @@ def main(argv: list[str] | None = None) -> dict:
             label = f"checkpoint {checkpoints[scene]}"
         else:
             model = default_model(scene, data_path, args.quick)
-            label = "default model (interaction, default preset), untrained"
+            label = "default model (contact, default preset), untrained"
         k, f = int(model.hparams.history_len), int(model.hparams.horizon)
         sim = meta0.n_sims - 1  # the test simulation of the default protocol
         first = meta0.n_frames - (k + 1)

@@ -2,7 +2,7 @@
 DEM's cached dataset of the same scene: what a model trained on one meets in the other.
 
 Per dataset: frames, particles, x-face crossings, the largest frame-to-frame step (LE-aware,
-the later frame's offset), the RMS step across the flow (x and y: the interaction model's
+the later frame's offset), the RMS step across the flow (x and y: the contact model's
 velocity unit), the mean-flow profile (Lees-Edwards: slope over the shear rate; periodic: the
 cosine amplitude over the drag-only amplitude ``A tau_p``), the mean coordination within
 1.01 d, the fraction of particles overlapping a neighbour by more than 2 % of d, and the height

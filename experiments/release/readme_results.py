@@ -27,7 +27,7 @@ END = "<!-- /results table -->"
 #: the source's columns shown in the README, and the scenes in the README's order
 COLUMNS = ("RMSE / d", "÷ CV", "÷ AR", "overlap %")
 SCENES = ("pbc", "lebc")
-#: the default model (model=interaction) is the grip mode
+#: the default model (model=contact) is the grip mode
 DEFAULT_MODE = "grip"
 
 
@@ -61,7 +61,7 @@ def readme_table(text: str) -> str:
             raise ValueError(f"{SOURCE}: no table for scene {scene!r}")
         for row in tables[scene]:
             model = row["model"]
-            shown = f"{model} (interaction)" if model == DEFAULT_MODE else model
+            shown = f"{model} (contact)" if model == DEFAULT_MODE else model
             cells = [scene, row["split"], shown, *(row[c] for c in COLUMNS)]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -83,7 +83,7 @@ def planned_split(card: dict) -> dict:
         fractions=dict(cfg.fractions),
         sims=dict(cfg.sims),
         simulations=cfg.simulations,
-        paper_windows=int(cfg.paper_windows),
+        in_sample_windows=int(cfg.in_sample_windows),
     )
     summary = plan.summary()
     return {key: summary[key] for key in SPLIT_KEYS if key in summary}
@@ -96,7 +96,7 @@ def encoder_text(encoder: dict) -> str:
 
     options = encoder_options(encoder)
     name = options.get("name", "graph_conv")
-    if name != "interaction":
+    if name != "contact":
         return f"encoder {name}, {options.get('channels')} channels"
     pair = options.get("pair_channels") or options.get("channels")
     updates = "with" if options.get("edge_updates") else "no"

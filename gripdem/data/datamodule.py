@@ -33,7 +33,7 @@ from gripdem.data.encodings import ENCODINGS, Encoding, make_encoding
 from gripdem.data.frames import FrameStore
 from gripdem.data.graph import DEFAULT_ALPHA
 from gripdem.data.normalizer import Normalizer
-from gripdem.data.protocols import PARTS, WindowPlan, plan_windows
+from gripdem.data.protocols import PARTS, WindowPlan, current_protocol, plan_windows
 from gripdem.data.resumable import ResumableLoader
 from gripdem.data.schema import DatasetError, DatasetMeta
 from gripdem.data.windows import Split
@@ -75,7 +75,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         fractions: Mapping[str, float] | None = None,
         sims: Mapping[str, Sequence[int] | None] | None = None,
         simulations: Sequence[int] | None = None,
-        paper_windows: int = 1,
+        in_sample_windows: int = 1,
         history_len: int | None = None,
         train_stride: int = 1,
         eval_stride: int | None = None,
@@ -101,14 +101,14 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.path = Path(path)
         self.split = Split.parse(split)
         self.plan_args = dict(
-            protocol=protocol,
+            protocol=current_protocol(protocol),
             history_len=history_len,
             train_stride=int(train_stride),
             eval_stride=eval_stride,
             fractions=None if fractions is None else dict(fractions),
             sims=None if sims is None else dict(sims),
             simulations=None if simulations is None else list(simulations),
-            paper_windows=int(paper_windows),
+            in_sample_windows=int(in_sample_windows),
         )
         self.encoding_name = encoding
         self.normalise = bool(normalise)
@@ -281,7 +281,7 @@ class TrajectoryDataModule(L.LightningDataModule):
     @property
     def in_sample(self) -> bool:
         if self.plan is None:
-            return self.plan_args["protocol"] == "paper"
+            return self.plan_args["protocol"] == "in_sample"
         return self.plan.in_sample
 
     @property

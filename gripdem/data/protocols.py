@@ -5,7 +5,7 @@ and test.
 - ``time``: each used simulation is cut in time at target-frame boundaries ``B1 < B2``: every
   training target frame is ``< B1``, every validation target frame in ``[B1, B2)``, every test
   target frame ``>= B2``. Inputs may reach back into the previous part (they are observed).
-- ``paper``: in-sample, as the reference scripts: train = val = test = the same window(s).
+- ``in_sample``: as the reference scripts: train = val = test = the same window(s).
   :attr:`WindowPlan.in_sample` is ``True``; every consumer reports it.
 - ``auto``: ``sims`` when the file holds at least 3 simulations, otherwise ``time``.
 
@@ -29,7 +29,10 @@ from gripdem.data.windows import (
     count_windows,
 )
 
-PROTOCOLS = ("sims", "time", "paper", "auto")
+PROTOCOLS = ("sims", "time", "in_sample", "auto")
+#: former protocol names (``paper`` until gripdem 0.1: the word also names the paper's models,
+#: preset and claims): old -> new; the old name works until 0.2.0 and warns
+RENAMED_PROTOCOLS = {"paper": "in_sample"}
 
 
 PARTS = ("train", "val", "test")
@@ -37,7 +40,7 @@ PARTS = ("train", "val", "test")
 
 @dataclass(frozen=True)
 class WindowPlan:
-    """Train/val/test windows of one protocol. ``in_sample`` is True for ``paper`` only."""
+    """Train/val/test windows of one protocol. ``in_sample`` is True for ``in_sample`` only."""
 
     protocol: str
     split: Split
@@ -109,7 +112,7 @@ def _sims_partition(
         raise SplitError(
             f"protocol 'sims' needs at least {n_val + n_test + 1} simulations (train, "
             f"{'val, ' if n_val else ''}test) but the data has {n_sims}; use protocol=time for "
-            "one long simulation, or protocol=paper (in-sample)"
+            "one long simulation, or protocol=in_sample"
         )
     order = list(range(n_sims))
     return {
@@ -117,6 +120,24 @@ def _sims_partition(
         "val": order[n_train : n_train + n_val],
         "test": order[n_train + n_val :],
     }
+
+
+def current_protocol(protocol: str, warn: bool = True) -> str:
+    """The protocol's name today: a former name (``RENAMED_PROTOCOLS``) is mapped to it, with a
+    ``DeprecationWarning`` unless ``warn`` is False (a file written before the rename)."""
+    new = RENAMED_PROTOCOLS.get(protocol)
+    if new is None:
+        return protocol
+    if warn:
+        import warnings
+
+        warnings.warn(
+            f"protocol {protocol!r} is deprecated: use {new!r} (the old name goes in gripdem "
+            "0.2.0)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+    return new
 
 
 def plan_windows(
@@ -130,15 +151,17 @@ def plan_windows(
     fractions: Mapping[str, float] | None = None,
     sims: Mapping[str, Sequence[int] | None] | None = None,
     simulations: Sequence[int] | None = None,
-    paper_windows: int = 1,
+    in_sample_windows: int = 1,
 ) -> WindowPlan:
     """Windows for every part of ``protocol``. Raises :class:`SplitError` with what fits.
 
     ``fractions``: of simulations (``sims``) or of frames (``time``). ``sims``: explicit
     simulation lists per part (``sims`` protocol). ``simulations``: which simulations ``time``
-    (default all) and ``paper`` (default ``[0]``) use. ``paper_windows``: how many windows the
-    in-sample protocol keeps (the reference used one).
+    (default all) and ``in_sample`` (default ``[0]``) use. ``in_sample_windows``: how many
+    windows the in-sample protocol keeps (the reference used one). A former protocol name
+    (``paper``) is read as today's with a ``DeprecationWarning``.
     """
+    protocol = current_protocol(protocol)
     try:
         return _plan(
             n_sims,
@@ -151,7 +174,7 @@ def plan_windows(
             fractions,
             sims,
             simulations,
-            paper_windows,
+            in_sample_windows,
         )
     except SplitError as exc:
         fits = what_fits(
@@ -163,7 +186,7 @@ def plan_windows(
             fractions,
             sims,
             simulations,
-            paper_windows,
+            in_sample_windows,
         )
         raise SplitError(
             f"{exc}\nThe data holds {n_sims} simulation(s) of {n_frames} frames each. {fits}"
@@ -181,7 +204,7 @@ def _plan(
     fractions,
     sims,
     simulations,
-    paper_windows,
+    in_sample_windows,
 ) -> WindowPlan:
     split = Split.parse(split)
     f = split.horizon
@@ -249,12 +272,12 @@ def _plan(
             stride = train_stride if p == "train" else eval_stride
             plan[p] = index([Segment(s, a, stride, count_windows(a, b, stride)) for s in used])
         in_sample = False
-    else:  # paper
+    else:  # in_sample
         used = [0] if simulations is None else [int(s) for s in simulations]
         _check_sims(used, n_sims, "simulations")
-        if paper_windows < 1:
-            raise SplitError(f"paper_windows must be >= 1, got {paper_windows}")
-        segs, left = [], paper_windows
+        if in_sample_windows < 1:
+            raise SplitError(f"in_sample_windows must be >= 1, got {in_sample_windows}")
+        segs, left = [], in_sample_windows
         for s in used:
             c = min(left, count_windows(0, n_frames - span, train_stride))
             segs.append(Segment(s, 0, train_stride, c))
@@ -295,7 +318,7 @@ def what_fits(
     fractions=None,
     sims=None,
     simulations=None,
-    paper_windows=1,
+    in_sample_windows=1,
 ) -> str:
     """One sentence: which paper splits fit this data under ``protocol``, and up to which
     ``history_len``."""
@@ -316,7 +339,7 @@ def what_fits(
                     fractions,
                     sims,
                     simulations,
-                    paper_windows,
+                    in_sample_windows,
                 )
             except SplitError:
                 continue

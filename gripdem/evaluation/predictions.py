@@ -14,8 +14,10 @@ Layout (lengths in the source data's units, metres by default; times in seconds)
       box, boundary, shear_rate, le_sign, le_time_origin   as in gripdem.data.schema
       radius, body_force_amplitude                         of the source data
       frame_interval    seconds between frames (also between the last observed and first target)
-      in_sample         true when the windows were also trained on (the paper protocol)
-      protocol          "sims" | "time" | "paper" (how train/val/test were separated)
+      in_sample         true when the windows were also trained on (the in_sample protocol)
+      protocol          "sims" | "time" | "in_sample" (how train/val/test were separated;
+                        a file written before gripdem 0.1's rename says "paper": read as
+                        "in_sample")
       run               JSON: free-form run description (scene, split, model, ...)
 
 The LE offset of predicted frame j of window w is ``Boundary.offset(times[w, j])``; the truth
@@ -38,11 +40,12 @@ import numpy as np
 from gripdem.boundary import Boundary, Box
 from gripdem.data.dataset_io import boundary_from_attrs, read_attr, read_float_attr
 from gripdem.data.h5io import atomic_h5_write
+from gripdem.data.protocols import current_protocol
 from gripdem.data.schema import DatasetError, check_shape, validate_positions
 
 FORMAT_NAME = "gripdem-predictions"
 FORMAT_VERSION = 1
-PROTOCOLS = ("sims", "time", "paper")
+PROTOCOLS = ("sims", "time", "in_sample")
 
 
 def _numpy(values) -> np.ndarray:
@@ -177,12 +180,12 @@ def validate(p: Predictions, path=None) -> None:
         )
     if p.protocol not in PROTOCOLS:
         raise DatasetError(path, "protocol", f"expected one of {PROTOCOLS}, got {p.protocol!r}")
-    if (p.protocol == "paper") != bool(p.in_sample):
+    if (p.protocol == "in_sample") != bool(p.in_sample):
         raise DatasetError(
             path,
             "in_sample",
-            f"expected in_sample={p.protocol == 'paper'} for protocol {p.protocol!r} (only the "
-            "paper protocol evaluates on its training windows)",
+            f"expected in_sample={p.protocol == 'in_sample'} for protocol {p.protocol!r} (only "
+            "the in_sample protocol evaluates on its training windows)",
         )
 
 
@@ -259,7 +262,7 @@ def read_predictions(path: str | os.PathLike) -> Predictions:
             radius=read_float_attr(path, h5, "radius"),
             frame_interval=read_float_attr(path, h5, "frame_interval"),
             in_sample=bool(read_attr(path, h5, "in_sample")),
-            protocol=str(read_attr(path, h5, "protocol")),
+            protocol=current_protocol(str(read_attr(path, h5, "protocol")), warn=False),
             sim_index=optional("sim_index"),
             window_start=optional("window_start"),
             baselines={k: np.asarray(v[()]) for k, v in h5.get("baseline", {}).items()},

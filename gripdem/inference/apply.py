@@ -174,7 +174,7 @@ def apply_checkpoint(
         "precision": run.stepper.precision,
         "encoding": hp["encoding"],
         "decoder_mode": hp["decoder_mode"],
-        "encoder": (hp.get("encoder") or {}).get("name", "graph_conv"),
+        "encoder": model.encoder_name,
         "ensemble": bool(model.is_ensemble),
         "members": members,
         "seed": seed,

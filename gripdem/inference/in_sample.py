@@ -67,7 +67,7 @@ def split_verdict(
         if first_target < boundary:
             return (
                 True,
-                "paper",
+                "in_sample",
                 f"IN SAMPLE: predicted frames from {first_target} on; the model trained on "
                 f"targets before frame {boundary} of simulations {shared}{source}",
             )
@@ -79,7 +79,7 @@ def split_verdict(
     if shared:
         return (
             True,
-            "paper",
+            "in_sample",
             f"IN SAMPLE: simulations {shared} were training simulations of this model{source}",
         )
     validation = sorted(set(sims) & set(split.get("sims_val", [])))

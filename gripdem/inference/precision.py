@@ -1,6 +1,6 @@
 """Reduced precision for the surrogate's encoder: bf16 where the hardware computes it natively.
 
-The interaction encoder's per-edge products dominate a forward pass (``gripdem.nn.interaction``).
+The contact encoder's per-edge products dominate a forward pass (``gripdem.nn.contact``).
 CPUs with AVX-512 bf16 or AMX tiles (Intel Cooper Lake, Sapphire Rapids and later; AMD Zen 4
 and later) and CUDA GPUs of compute capability 8.0+ compute them in bf16 at two or more times
 the fp32 rate; elsewhere bf16 is emulated and slower, so ``auto`` keeps fp32 there.

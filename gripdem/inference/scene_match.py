@@ -2,7 +2,7 @@
 :func:`gripdem.inference.checkpoint.check_compatible`).
 
 What a gripdem model reads, and in which units (``gripdem.models.module``,
-``gripdem.nn.interaction``, ``gripdem.data.graph``; ``gripdem.predict`` builds the model with
+``gripdem.nn.contact``, ``gripdem.data.graph``; ``gripdem.predict`` builds the model with
 the DATA's scene):
 
 - geometry, in the data's own units: pair vectors and surface gaps in the data's diameter

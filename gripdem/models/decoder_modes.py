@@ -281,7 +281,7 @@ def history_steps(batch, boundary: Boundary) -> torch.Tensor:
 
 def flow_relative_history(batch, boundary: Boundary, strain: float) -> torch.Tensor:
     """The observed steps without the LE cell's affine flow (``strain`` per frame) ``(B, N, K,
-    3)`` float64, once per batch (the interaction encoder's inputs and the AR prior)."""
+    3)`` float64, once per batch (the contact encoder's inputs and the AR prior)."""
 
     def compute():
         steps = history_steps(batch, boundary)

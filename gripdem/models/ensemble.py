@@ -1,5 +1,5 @@
 """Ensemble members of a trajectory model: a model whose encoder draws per-particle latent noise
-(``model.encoder.noise_channels > 0``, :mod:`gripdem.nn.interaction`) is an *ensemble* model;
+(``model.encoder.noise_channels > 0``, :mod:`gripdem.nn.contact`) is an *ensemble* model;
 every forward pass is one member, a sample of the next frames. Trained on the fair CRPS over
 ``model.members`` members per window (``model.loss=crps``,
 :func:`gripdem.models.decoder_modes.exact_crps_loss`), scored in validation and test on

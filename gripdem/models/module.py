@@ -6,8 +6,8 @@ with the LE-aware RMSE of :mod:`gripdem.evaluation.metrics`, beside the baseline
 windows. The best checkpoint is chosen on ``val/rmse`` (the rollout), not on the training loss.
 
 Encoders (``encoder["name"]``): ``graph_conv`` (the paper's graph convolution on the fixed
-graph, :mod:`gripdem.nn.graph_conv`) and ``interaction`` (learned pair messages from relative
-geometry and motion, :mod:`gripdem.nn.interaction`; needs the exact frame).
+graph, :mod:`gripdem.nn.graph_conv`) and ``contact`` (learned pair messages from relative
+geometry and motion, :mod:`gripdem.nn.contact`; needs the exact frame).
 """
 
 from __future__ import annotations
@@ -33,25 +33,22 @@ from gripdem.models.baselines import BASELINES
 from gripdem.models.ensemble import EnsembleMembers
 from gripdem.models.evaluation import RolloutEvaluation
 from gripdem.models.training import TrainingSteps
+from gripdem.nn.contact import ContactEncoder, ContactGraph
 from gripdem.nn.direct import DirectDecoder
 from gripdem.nn.graph_conv import EdgeGraph, GraphConvEncoder
-from gripdem.nn.interaction import ContactGraph, InteractionEncoder
 from gripdem.nn.seq2seq import TrajectoryDecoder
 
-ENCODERS = ("graph_conv", "interaction")
+ENCODERS = ("graph_conv", "contact")
+#: former encoder names (a model file written before the rename names its encoder so): old -> new
+RENAMED_ENCODERS = {"interaction": "contact"}
 #: the options each encoder reads from ``model.encoder`` (``name`` and ``cutoff`` are shared:
 #: the cut-off is the data's graph cut-off, ``data.graph_cutoff`` follows it)
 ENCODER_OPTIONS = {
     "graph_conv": (
-        "channels",
-        "n_blocks",
-        "temporal_kernel",
-        "dropout",
-        "trainable_graph",
-        "edge_feature_dim",
-        "dense_init",
+        *("channels", "n_blocks", "temporal_kernel", "dropout", "trainable_graph"),
+        *("edge_feature_dim", "dense_init"),
     ),
-    "interaction": (
+    "contact": (
         *("channels", "rounds", "edge_history", "edge_updates", "position_features"),
         *("noise_channels", "noise_into", "noise_neighbours", "pair_channels"),
     ),
@@ -65,16 +62,21 @@ def encoder_options(cfg: dict[str, Any] | None) -> dict[str, Any]:
     """The options the named encoder reads, each missing one filled with the encoder's default
     (a model saved before an option existed compares equal to one built with its default)."""
     cfg = dict(cfg or {})
-    name = cfg.get("name", "graph_conv")
+    name = current_encoder_name(cfg.get("name", "graph_conv"))
     if name not in ENCODER_OPTIONS:
         return cfg
-    cls = GraphConvEncoder if name == "graph_conv" else InteractionEncoder
+    cls = GraphConvEncoder if name == "graph_conv" else ContactEncoder
     params = inspect.signature(cls.__init__).parameters
     out: dict[str, Any] = {"name": name}
     for key in ENCODER_OPTIONS[name]:
         default = params[key].default if key in params else None
         out[key] = cfg.get(key, None if default is inspect.Parameter.empty else default)
     return out
+
+
+def current_encoder_name(name: Any) -> Any:
+    """The encoder's name today: a model file keeps the name it was written with."""
+    return RENAMED_ENCODERS.get(name, name) if isinstance(name, str) else name
 
 
 def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
@@ -86,7 +88,7 @@ def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
 
 
 def _uses_position_features(setting: Any, boundary: Boundary) -> bool:
-    """x-position features for the interaction encoder: the periodic drive depends on x; the
+    """x-position features for the contact encoder: the periodic drive depends on x; the
     sheared cell is homogeneous (``auto``)."""
     setting = str(setting).lower()
     if setting not in POSITION_FEATURES:
@@ -107,7 +109,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         horizon: predicted frames f. history_len: observed steps K the model reads.
         decoder_mode: ``grip`` | ``pct`` | ``vct``; vct_shift: ``learned`` | ``exact`` (paper
             frame only); residual_base: ``constant_velocity`` | ``stay`` (paper pct/vct only).
-        encoder: ``name`` (``graph_conv`` | ``interaction``) and that encoder's options.
+        encoder: ``name`` (``graph_conv`` | ``contact``) and that encoder's options.
         hidden, layers, n_heads, decoder_dropout: the seq2seq GRU networks.
         lr, weight_decay: Adam (AdamW when weight_decay > 0); lr_schedule: ``constant`` |
             ``cosine`` (linear warm-up over ``warmup_fraction`` of the steps, then cosine to 0).
@@ -202,7 +204,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
                 )
             # zero: an untrained model is CV; one gate per horizon step and axis
             self.ar_gate = torch.nn.Parameter(torch.zeros(horizon, 3))
-        self.position_features = False  # x-position node features (interaction encoder)
+        self.position_features = False  # x-position node features (contact encoder)
         self.encoder_name, self.encoder = self._build_encoder(dict(encoder or {}), n_particles)
         lay = modes.layout(decoder_mode, self.encoding, self.normalizer)
         self.decoder = self._build_decoder(decoder, lay, hidden, layers, n_heads, decoder_dropout)
@@ -255,7 +257,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
     def _build_encoder(self, cfg: dict[str, Any], n_particles: int | None):
         """The encoder named ``cfg["name"]`` with its own options (the shared config schema
         holds the options of both; each reads its own)."""
-        name = cfg.get("name", "graph_conv")
+        name = current_encoder_name(cfg.get("name", "graph_conv"))
         if name not in ENCODERS:
             raise ValueError(f"model.encoder.name must be one of {ENCODERS}, got {name!r}")
         options = {k: v for k, v in cfg.items() if k in ENCODER_OPTIONS[name]}
@@ -265,16 +267,16 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             )
         if not self.exact:
             raise ValueError(
-                "model.encoder.name=interaction reads Cartesian steps: it needs the exact frame "
+                "model.encoder.name=contact reads Cartesian steps: it needs the exact frame "
                 f"(model.encoding=unwrapped), got {self.encoding.name!r}"
             )
         if self.hparams.history_len is None:
-            raise ValueError("the interaction encoder needs history_len")
+            raise ValueError("the contact encoder needs history_len")
         self.position_features = _uses_position_features(
             options.pop("position_features", "auto"), self.boundary
         )
         static = 2 if self.position_features else 0
-        return name, InteractionEncoder(int(self.hparams.history_len), static, **options)
+        return name, ContactEncoder(int(self.hparams.history_len), static, **options)
 
     # ----------------------------------------------------------------------------------------
     # forward
@@ -282,11 +284,11 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
     @property
     def velocity_unit(self) -> float:
         """Spread of the steps across the flow (x and y: no mean flow in either scene), in
-        metres per frame: the unit of the interaction encoder's inputs."""
+        metres per frame: the unit of the contact encoder's inputs."""
         std = self.normalizer.std
         return math.sqrt(0.5 * (std[0] ** 2 + std[1] ** 2))
 
-    def _interaction_inputs(self, batch) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def _contact_inputs(self, batch) -> tuple[torch.Tensor, torch.Tensor | None]:
         """Flow-relative steps ``(B, N, K, 3)`` in velocity units and, where the drive depends
         on x, ``sin``/``cos`` of x at the last observed frame ``(B, N, 2)``."""
         relative = modes.flow_relative_history(batch, self.boundary, self.strain)
@@ -303,8 +305,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
     def _encode(self, batch, noise: torch.Tensor | None = None) -> torch.Tensor:
         """Per-particle features ``(B, N, T, C)`` for the seq2seq block (an ensemble model
         draws its noise when none is given)."""
-        if self.encoder_name == "interaction":
-            history, static = self._interaction_inputs(batch)
+        if self.encoder_name == "contact":
+            history, static = self._contact_inputs(batch)
             if noise is None and self.is_ensemble:
                 noise = self.sample_noise(history.shape[0], history.shape[1])
             return self.encoder(history, static, self.contact_graph(batch), noise)
@@ -368,7 +370,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         )
 
     def contact_graph(self, batch) -> ContactGraph:
-        """The batch's neighbour pairs without the self pairs (interaction encoder)."""
+        """The batch's neighbour pairs without the self pairs (contact encoder)."""
         keep = batch.edge_index[0] != batch.edge_index[1]
         return ContactGraph(
             batch.edge_index[:, keep],

@@ -2,7 +2,7 @@
 
 The seq2seq GRU (:mod:`gripdem.nn.seq2seq`) unrolls the horizon one step after another, a
 sequential loop over ``f`` steps that costs as much as a message-passing round on a CPU. When the
-encoder already carries the interactions (:mod:`gripdem.nn.interaction`), the decoder only has to
+encoder already carries the interactions (:mod:`gripdem.nn.contact`), the decoder only has to
 spread one context vector over the horizon: an MLP does that in one pass. Its last layer starts
 at zero, so an untrained head outputs zeros (the exact frame's constant velocity).
 

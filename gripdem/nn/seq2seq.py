@@ -39,7 +39,7 @@ class Seq2SeqGRU(nn.Module):
 
     ``context="sequence"``: a GRU encodes the features over time (the graph-conv encoder's
     ``(nodes, K, C)``). ``context="vector"``: the features are one vector per node (the
-    interaction encoder's ``(nodes, 1, C)``) and a linear map with tanh gives the decoder's
+    contact encoder's ``(nodes, 1, C)``) and a linear map with tanh gives the decoder's
     initial hidden state of every layer (a GRU over one step from a zero state would leave its
     hidden-to-hidden weights unused).
 

@@ -18,7 +18,10 @@ from enum import Enum
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING, DictConfig, OmegaConf, open_dict
+from omegaconf import MISSING, DictConfig
+
+from gripdem.runner.renamed_options import apply_deprecated_names
+from gripdem.runner.run_names import hydra_choices
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +50,8 @@ class TrainableGraph(Enum):
 
 class EncoderName(Enum):
     graph_conv = "graph_conv"
+    contact = "contact"
+    # deprecated name of contact (until 0.2.0)
     interaction = "interaction"
 
 
@@ -75,8 +80,10 @@ class EncodingName(Enum):
 class Protocol(Enum):
     sims = "sims"
     time = "time"
-    paper = "paper"
+    in_sample = "in_sample"
     auto = "auto"
+    # deprecated name of in_sample (until 0.2.0)
+    paper = "paper"
 
 
 @dataclass
@@ -100,7 +107,7 @@ class EncoderSchema:
     trainable_graph: TrainableGraph = TrainableGraph.edge
     edge_feature_dim: int = 4
     dense_init: str = "zeros"
-    # interaction
+    # contact
     rounds: int = 3
     edge_history: int = 3
     edge_updates: bool = True
@@ -161,7 +168,9 @@ class DataSchema:
     fractions: dict[str, float] = field(default_factory=dict)
     sims: dict[str, Optional[list[int]]] = field(default_factory=dict)
     simulations: Optional[list[int]] = None
-    paper_windows: int = 1
+    in_sample_windows: int = 1
+    # deprecated name of in_sample_windows (until 0.2.0): when set, it replaces it
+    paper_windows: Optional[int] = None
     history_len: Optional[int] = None
     train_stride: int = 1
     eval_stride: Optional[int] = None
@@ -237,6 +246,7 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
     works but is probably not meant (``notes=False``: checks only; the runner checks every
     job before it starts and again, with the notes, inside the job)."""
     if not notes:
+        apply_deprecated_names(cfg)  # its lines print once per process, notes or not
         previous = log.disabled
         log.disabled = True
         try:
@@ -266,9 +276,9 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
         )
     if cfg.model.vct_shift == VctShift.exact and mode != "vct":
         raise ValueError("model.vct_shift=exact is only read by model.decoder_mode=vct")
-    if cfg.model.encoder.name == EncoderName.interaction and not exact:
+    if cfg.model.encoder.name == EncoderName.contact and not exact:
         raise ValueError(
-            "model.encoder.name=interaction needs the exact frame: model.encoding=unwrapped, "
+            "model.encoder.name=contact needs the exact frame: model.encoding=unwrapped, "
             f"got {cfg.model.encoding.value}"
         )
     for option, on in (
@@ -287,51 +297,13 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
             "for LE crossers)",
             cfg.model.encoding.value,
         )
-    if cfg.data.protocol == Protocol.paper:
-        log.warning("data.protocol=paper is IN-SAMPLE (train = test): report it as such")
+    if cfg.data.protocol == Protocol.in_sample:
+        log.warning("data.protocol=in_sample is IN-SAMPLE (train = test): report it as such")
     _check_split_fits_the_preset(cfg)
     _check_logger_options(cfg.get("logger") or {})
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
-
-
-#: renamed options: old name -> (new name, the release that removes the old one)
-RENAMED = {
-    "experiment=fast": ("experiment=default", "0.2.0"),
-    "model.fast_steps": ("model.train_steps", "0.2.0"),
-}
-
-
-def apply_deprecated_names(cfg: DictConfig) -> list[str]:
-    """Old option names still work for one release: each used one prints one line naming its
-    replacement (``RENAMED``), and ``model.fast_steps`` is carried over to ``train_steps``.
-    Returns the old names found."""
-    found = []
-    if hydra_choices(cfg).get("experiment") == "fast":
-        found.append("experiment=fast")
-    if cfg.model.get("fast_steps") is not None:
-        found.append("model.fast_steps")
-        with open_dict(cfg):
-            cfg.model.train_steps = int(cfg.model.fast_steps)
-            cfg.model.fast_steps = None
-    for old in found:
-        new, removed = RENAMED[old]
-        log.warning("%s is deprecated: use %s (the old name goes in gripdem %s)", old, new, removed)
-    return found
-
-
-def hydra_choices(cfg: DictConfig) -> dict[str, str]:
-    """Hydra's chosen config files (``{"preset": "tiny", "experiment": "smoke", ...}``): from
-    the config's own ``hydra`` node, else from the running job (empty outside Hydra)."""
-    node = OmegaConf.select(cfg, "hydra.runtime.choices", default=None)
-    if node is None:
-        from hydra.core.hydra_config import HydraConfig
-
-        if not HydraConfig.initialized():
-            return {}
-        node = HydraConfig.get().runtime.choices
-    return {str(k): str(v) for k, v in (node or {}).items() if v is not None}
 
 
 def _check_logger_options(options) -> None:

@@ -144,3 +144,16 @@ def register_resolver() -> None:
     """Make ``${gripdem.run_name:}`` known to OmegaConf (idempotent)."""
     if not OmegaConf.has_resolver(RESOLVER):
         OmegaConf.register_new_resolver(RESOLVER, _resolve)
+
+
+def hydra_choices(cfg: DictConfig) -> dict[str, str]:
+    """Hydra's chosen config files (``{"preset": "tiny", "experiment": "smoke", ...}``): from
+    the config's own ``hydra`` node, else from the running job (empty outside Hydra)."""
+    node = OmegaConf.select(cfg, "hydra.runtime.choices", default=None)
+    if node is None:
+        from hydra.core.hydra_config import HydraConfig
+
+        if not HydraConfig.initialized():
+            return {}
+        node = HydraConfig.get().runtime.choices
+    return {str(k): str(v) for k, v in (node or {}).items() if v is not None}

@@ -37,9 +37,9 @@ log = logging.getLogger(__name__)
 #: reference 2-core machine (experiments/results/mission_command.md): (encoder, decoder) ->
 #: (base, per predicted frame of the model's horizon)
 SECONDS_PER_STEP = {
-    ("interaction", "direct"): (0.046, 0.0),
+    ("contact", "direct"): (0.046, 0.0),
     ("graph_conv", "direct"): (0.33, 0.0),
-    ("interaction", "gru"): (0.046, 0.0066),
+    ("contact", "gru"): (0.046, 0.0066),
     ("graph_conv", "gru"): (0.33, 0.0066),
 }
 #: seconds per job besides training at 2000 particles: loading, the AR fit, validation, the

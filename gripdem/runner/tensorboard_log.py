@@ -35,8 +35,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gripdem.evaluation.metrics import shown_in_tensorboard
 from gripdem.runner.atomic_files import AtomicTensorBoardLogger
-from gripdem.runner.config_schema import hydra_choices
-from gripdem.runner.run_names import override_keys
+from gripdem.runner.run_names import hydra_choices, override_keys
 
 #: settings that define a run, as command-line keys (a group's key holds its choice)
 RUN_SETTINGS = (

@@ -157,7 +157,7 @@ def test_normaliser_is_restored_from_a_checkpoint_state(le_path):
 
 
 def test_paper_protocol_batches_are_labelled_in_sample(le_path):
-    dm = _module(le_path, protocol="paper", split="40-5", history_len=None)
+    dm = _module(le_path, protocol="in_sample", split="40-5", history_len=None)
     assert dm.in_sample and dm.summary()["in_sample"] is True
     batch = next(iter(dm.train_dataloader()))
     assert batch.in_sample and batch.batch_size == 1

@@ -82,13 +82,18 @@ def test_time_targets_are_ordered_and_counted(split, history_len):
     assert max(targets["test"]) <= n_frames - 1
 
 
-def test_paper_protocol_is_in_sample():
-    plan = plan_windows(1, 201, "190-10", "paper")
+def test_in_sample_protocol_is_in_sample():
+    plan = plan_windows(1, 201, "190-10", "in_sample")
     assert plan.in_sample and plan.summary()["in_sample"] is True
     assert list(plan.train) == list(plan.test) == list(plan.val)
     assert len(plan.train) == 1 and plan.train[0].stop == 201
-    many = plan_windows(2, 40, "10-5", "paper", train_stride=4, simulations=[0, 1], paper_windows=9)
+    many = plan_windows(
+        2, 40, "10-5", "in_sample", train_stride=4, simulations=[0, 1], in_sample_windows=9
+    )
     assert len(many.train) == 9 and many.train.sims == (0, 1)
+    with pytest.warns(DeprecationWarning, match="protocol 'paper' is deprecated: use 'in_sample'"):
+        old = plan_windows(1, 201, "190-10", "paper")  # the name before gripdem 0.1
+    assert old.protocol == "in_sample" and list(old.test) == list(plan.test)
 
 
 def test_auto_protocol():

@@ -184,7 +184,7 @@ def _outside(p):
             "expected shape",
         ),
         (lambda p: setattr(p, "sim_index", np.arange(5)), "sim_index", "expected shape"),
-        (lambda p: setattr(p, "in_sample", True), "in_sample", "paper"),
+        (lambda p: setattr(p, "in_sample", True), "in_sample", "in_sample"),
         (lambda p: setattr(p, "protocol", "auto"), "protocol", "expected one of"),
     ],
 )
@@ -210,11 +210,14 @@ def test_reader_errors_name_the_file_and_field(tmp_path):
         read_predictions(path)
 
 
-def test_paper_protocol_is_labelled_in_sample_and_short_horizons_need_an_interval(tmp_path):
+def test_in_sample_protocol_is_labelled_in_sample_and_short_horizons_need_an_interval(tmp_path):
     q = make_predictions()
-    q.protocol, q.in_sample = "paper", True
+    q.protocol, q.in_sample = "in_sample", True
     back = read_predictions(write_predictions(tmp_path / "p.h5", q))
     assert back.in_sample and "in-sample" in back.title()
+    with h5py.File(tmp_path / "p.h5", "a") as h5:  # a file written before the rename
+        h5.attrs["protocol"] = "paper"
+    assert read_predictions(tmp_path / "p.h5").protocol == "in_sample"
     assert evaluate_predictions(back, physics=False)["in_sample"] is True
     with pytest.raises(ValueError, match="frame_interval"):
         Predictions(

@@ -29,7 +29,7 @@ def make_checkpoint_fixture():
 
 @pytest.fixture(scope="session")
 def le_checkpoint(tmp_path_factory, le_file):
-    """Untrained default model (interaction encoder, exact frame) on ``le_file``."""
+    """Untrained default model (contact encoder, exact frame) on ``le_file``."""
     return make_checkpoint(le_file, tmp_path_factory.mktemp("le_run"), ["scene=lebc"])
 
 

@@ -74,7 +74,7 @@ def test_a_run_model_file_away_from_its_run_flags_its_training_simulations(
         "sims_test": [2],
     }
     in_sample, protocol, note = training_overlap(run_model_file, le_file, [0, 2], 11)
-    assert (in_sample, protocol) == (True, "paper")
+    assert (in_sample, protocol) == (True, "in_sample")
     assert (
         note == "IN SAMPLE: simulations [0] were training simulations of this model (per its card)"
     )
@@ -90,7 +90,7 @@ def test_a_run_model_file_away_from_its_run_flags_its_training_simulations(
     args = [str(run_model_file), str(le_file), "--out", str(out), "--sims", "0", "--no-overlap"]
     assert main(args) == 0
     assert "(per its card)" in capsys.readouterr().out
-    assert read_predictions(out).in_sample and read_predictions(out).protocol == "paper"
+    assert read_predictions(out).in_sample and read_predictions(out).protocol == "in_sample"
 
 
 def test_other_data_and_cards_without_training_data(

@@ -229,18 +229,18 @@ def test_in_sample_check_reads_the_run_metrics(tmp_path, le_file, le_checkpoint)
     summary = {"path": str(le_file), "protocol": "sims", "sims_train": [0], "sims_val": [1]}
     metrics.write_text(json.dumps({"data": summary}))
     try:
-        assert training_overlap(le_checkpoint, le_file, [0, 2], 10)[:2] == (True, "paper")
+        assert training_overlap(le_checkpoint, le_file, [0, 2], 10)[:2] == (True, "in_sample")
         assert training_overlap(le_checkpoint, le_file, [2], 10)[:2] == (False, "sims")
         assert "validation" in training_overlap(le_checkpoint, le_file, [1], 10)[2]
         assert training_overlap(le_checkpoint, tmp_path / "x.h5", [0], 10)[0] is False
         summary.update(protocol="time", sims_train=[0, 1, 2], time_boundaries=[24, 32])
         metrics.write_text(json.dumps({"data": summary}))
-        assert training_overlap(le_checkpoint, le_file, [0], 20)[:2] == (True, "paper")
+        assert training_overlap(le_checkpoint, le_file, [0], 20)[:2] == (True, "in_sample")
         assert training_overlap(le_checkpoint, le_file, [0], 24)[:2] == (False, "time")
         out = tmp_path / "p.h5"
         assert run(le_checkpoint, le_file, out, "--start", 0, "--sims", 1, "--no-overlap") == 0
         p = read_predictions(out)
-        assert p.in_sample and p.protocol == "paper"
+        assert p.in_sample and p.protocol == "in_sample"
         with h5py.File(out) as h5:
             assert json.loads(h5.attrs["run"])["sims"] == [1]
     finally:

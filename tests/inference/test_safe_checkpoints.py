@@ -92,16 +92,33 @@ def test_ckpt_and_model_file_predict_the_same(tmp_path, le_file, moved):
 def test_model_file_round_trip_and_run_export(tmp_path, moved):
     ckpt, _ = moved
     model = load_checkpoint_model(ckpt)
-    run = {"scene": "lebc", "split": "10-5", "model": "interaction", "seed": 0}
+    run = {"scene": "lebc", "split": "10-5", "model": "contact", "seed": 0}
     path = export_run_model(
         model, tmp_path / "best.safetensors", run, {"test/rmse": 1.5e-9, "x": math.nan}
     )
     hparams, state, card = load_model_file(path)
     assert hparams == json.loads(json.dumps(dict(model.hparams)))
     assert all(torch.equal(state[k], v) for k, v in model.state_dict().items())
-    assert (card["scene"], card["split"], card["model"]) == ("lebc", "10-5", "interaction")
+    assert (card["scene"], card["split"], card["model"]) == ("lebc", "10-5", "contact")
     assert card["metrics"] == {"test/rmse": 1.5e-9} and card["gripdem_version"]
     assert [p.name for p in tmp_path.iterdir()] == ["best.safetensors"]  # atomic: no temp left
+
+
+def test_a_model_file_from_before_the_encoder_rename_predicts_the_same(tmp_path, le_file, moved):
+    """``interaction``, the contact encoder's name before gripdem 0.1, in a file's
+    hyperparameters: the file loads and predicts what it predicted before."""
+    _, model_file = moved
+    hparams, state, card = load_model_file(model_file)
+    assert hparams["encoder"]["name"] == "contact"
+    hparams["encoder"]["name"] = "interaction"
+    old_file = save_model_file(hparams, tmp_path / "old.safetensors", card, state)
+    assert load_model_file(old_file)[0]["encoder"]["name"] == "interaction"  # read as written
+    outputs = []
+    for path in (model_file, old_file):
+        status, err = run_predict(path, le_file, tmp_path / f"{path.stem}.h5")
+        assert status == 0 and "deprecated" not in err, err
+        outputs.append(_arrays(tmp_path / f"{path.stem}.h5")["pred_positions"])
+    np.testing.assert_array_equal(outputs[0], outputs[1])
 
 
 @pytest.mark.parametrize("name", sorted(payloads(Path("m"))))

@@ -15,7 +15,7 @@ from gripdem.models.autoregressive import fit_on_training_frames
 from gripdem.models.baselines import constant_velocity
 from gripdem.models.module import TrajectoryModule
 
-ENCODER = {"name": "interaction", "channels": 8, "rounds": 2}
+ENCODER = {"name": "contact", "channels": 8, "rounds": 2}
 
 
 def datamodule(path) -> TrajectoryDataModule:

@@ -20,9 +20,9 @@ EXACT_MODES = [
     ("grip", "graph_conv"),
     ("pct", "graph_conv"),
     ("vct", "graph_conv"),
-    ("grip", "interaction"),
-    ("pct", "interaction"),
-    ("vct", "interaction"),
+    ("grip", "contact"),
+    ("pct", "contact"),
+    ("vct", "contact"),
 ]
 
 
@@ -36,7 +36,7 @@ def module(
     scene.update(diameter=meta.diameter, frame_interval=meta.frame_interval)
     encoders = {
         "graph_conv": {"name": "graph_conv", "channels": 8, "n_blocks": 1},
-        "interaction": {"name": "interaction", "channels": 8, "rounds": 2},
+        "contact": {"name": "contact", "channels": 8, "rounds": 2},
     }
     torch.manual_seed(0)
     model = TrajectoryModule(
@@ -131,7 +131,7 @@ def test_untrained_model_is_constant_velocity(
 def test_untrained_model_is_constant_velocity_on_the_dem_scene(request, scene, mode, encoder):
     """The same on the built-in DEM's tiny scenes (real contacts, real LE crossers)."""
     path = request.getfixturevalue(f"tiny_{scene}_path")
-    dm = _datamodule(path, "50-10", 10, cutoff=1.5 if encoder == "interaction" else 3.0)
+    dm = _datamodule(path, "50-10", 10, cutoff=1.5 if encoder == "contact" else 3.0)
     model = module(dm, mode, encoder)
     for batch in dm.test_dataloader():
         with torch.no_grad():
@@ -187,7 +187,7 @@ def test_ar_prior_starts_at_cv_and_its_open_gate_is_the_ar_baseline(crossing_pat
     strong shear: AR and CV differ by much more than the tolerance)."""
     dm = _datamodule(crossing_paths[scene], "6-4", 4)
     ar = fit_on_training_frames(dm, 2)
-    model = module(dm, mode, "interaction", ar_prior=True, linear_ar=ar.to_dict())
+    model = module(dm, mode, "contact", ar_prior=True, linear_ar=ar.to_dict())
     box = dm.meta.box
     for batch in dm.test_dataloader():
         with torch.no_grad():
@@ -242,7 +242,7 @@ def test_direct_decoder_inputs_differ_by_mode(crossing_paths):
     batch = next(iter(dm.test_dataloader()))
     sizes = {}
     for mode in ("grip", "pct", "vct"):
-        model = module(dm, mode, "interaction", decoder="direct")
+        model = module(dm, mode, "contact", decoder="direct")
         sizes[mode] = model.decoder.net[0].in_features - model.encoder.out_channels
     assert sizes == {"grip": 3, "pct": 6, "vct": 6}
     from gripdem.models.decoder_modes import direct_state
@@ -258,7 +258,7 @@ def test_zero_mean_removes_any_net_deviation(crossing_paths, decoder):
     """A perturbed model's deviation from CV averages to zero over the particles at every step
     (the truth's does, to round-off), so its centre of mass moves exactly as CV's."""
     dm = _datamodule(crossing_paths["lebc"], "6-4", 4)
-    model = module(dm, "grip", "interaction", decoder=decoder, zero_mean=True)
+    model = module(dm, "grip", "contact", decoder=decoder, zero_mean=True)
     with torch.no_grad():
         for p in model.parameters():
             p.add_(0.1 * torch.randn_like(p))
@@ -274,4 +274,4 @@ def test_direct_decoder_needs_the_exact_frame(crossing_paths):
     with pytest.raises(ValueError, match="model.decoder=direct"):
         module(paper, "pct", "graph_conv", encoding="sincos", decoder="direct")
     with pytest.raises(ValueError, match="model.decoder must be one of"):
-        module(dm, "grip", "interaction", decoder="lstm")
+        module(dm, "grip", "contact", decoder="lstm")

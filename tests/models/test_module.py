@@ -17,7 +17,7 @@ MODES = [  # (decoder mode, encoding, vct shift, encoder)
     ("grip", "unwrapped", "learned", "graph_conv"),
     ("pct", "unwrapped", "learned", "graph_conv"),
     ("vct", "unwrapped", "learned", "graph_conv"),
-    ("grip", "unwrapped", "learned", "interaction"),
+    ("grip", "unwrapped", "learned", "contact"),
     ("grip", "sincos", "learned", "graph_conv"),
     ("pct", "sincos", "learned", "graph_conv"),
     ("vct", "vct", "learned", "graph_conv"),
@@ -25,7 +25,7 @@ MODES = [  # (decoder mode, encoding, vct shift, encoder)
 ]
 ENCODERS = {
     "graph_conv": {"name": "graph_conv", "channels": 8, "n_blocks": 2},
-    "interaction": {"name": "interaction", "channels": 8, "rounds": 2},
+    "contact": {"name": "contact", "channels": 8, "rounds": 2},
 }
 
 
@@ -79,7 +79,7 @@ def test_shapes_and_decoded_positions_inside_the_box(
     request, scene, mode, encoding, shift, encoder
 ):
     path = request.getfixturevalue(f"tiny_{scene}_path")
-    dm = datamodule(path, encoding, graph_cutoff=1.5 if encoder == "interaction" else 3.0)
+    dm = datamodule(path, encoding, graph_cutoff=1.5 if encoder == "contact" else 3.0)
     model = kick(make_module(dm, mode, encoding, shift, encoder)).eval()
     batch = next(iter(dm.val_dataloader()))
     with torch.no_grad():
@@ -104,7 +104,7 @@ def test_untrained_paper_grip_is_constant_velocity_along_a_chord(tiny_pbc_path):
 
 @pytest.mark.parametrize(("mode", "encoding", "shift", "encoder"), MODES)
 def test_gradients_reach_every_parameter(tiny_lebc_path, mode, encoding, shift, encoder):
-    dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=1.5 if encoder == "interaction" else 3.0)
+    dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=1.5 if encoder == "contact" else 3.0)
     model = kick(make_module(dm, mode, encoding, shift, encoder))
     batch = next(iter(dm.train_dataloader()))
     loss = model._loss(model(batch), batch)
@@ -133,7 +133,7 @@ def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
     """
     torch.manual_seed(0)
     dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=1.5)
-    options = {"graph_conv": {"channels": 16, "n_blocks": 1}, "interaction": {"channels": 16}}
+    options = {"graph_conv": {"channels": 16, "n_blocks": 1}, "contact": {"channels": 16}}
     model = make_module(dm, mode, encoding, shift, {"name": encoder, **options[encoder]}, hidden=32)
     batch = next(iter(dm.val_dataloader()))  # one fixed window, whatever the shuffling
     opt = torch.optim.Adam(model.parameters(), lr=1e-2)
@@ -150,14 +150,14 @@ def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
 
 @pytest.mark.parametrize(
     ("encoding", "encoder"),
-    [("sincos", "edge"), ("sincos", "none"), ("unwrapped", "edge"), ("unwrapped", "interaction")],
+    [("sincos", "edge"), ("sincos", "none"), ("unwrapped", "edge"), ("unwrapped", "contact")],
 )
 def test_permuting_particles_permutes_predictions(tiny_lebc_path, encoding, encoder):
-    cutoff = 1.5 if encoder == "interaction" else 3.0
+    cutoff = 1.5 if encoder == "contact" else 3.0
     dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=cutoff)
     config = (
-        ENCODERS["interaction"]
-        if encoder == "interaction"
+        ENCODERS["contact"]
+        if encoder == "contact"
         else {"name": "graph_conv", "channels": 8, "trainable_graph": encoder}
     )
     model = kick(make_module(dm, "grip", encoding, "learned", config))
@@ -206,7 +206,7 @@ def shear_with_crossings(tmp_path) -> str:
 
 def test_paper_vct_exact_shift_reproduces_the_le_jumps_of_affine_shear(tmp_path):
     dm = datamodule(
-        shear_with_crossings(tmp_path), "vct", split="20-8", history_len=3, protocol="paper"
+        shear_with_crossings(tmp_path), "vct", split="20-8", history_len=3, protocol="in_sample"
     )
     # the paper's 8 channels, docs/spec/model.md#exact-shift
     exact = make_module(dm, "vct", "vct", "exact")

@@ -39,6 +39,6 @@ def test_smoke_run_console_is_clean(tmp_path, gripdem_data_root, tiny_pbc_path):
     assert "Tip:" not in text and "litlogger" not in text
     assert "LeafSpec" not in text
     tail = text.strip().splitlines()[-9:]
-    assert tail[0].startswith("== gripdem result: pbc / 10-5 / interaction (seed 0) ==")
+    assert tail[0].startswith("== gripdem result: pbc / 10-5 / contact (seed 0) ==")
     assert tail[1].startswith("| test (out of sample) |")
     assert tail[-1] == f"outputs: {out}"

@@ -83,7 +83,7 @@ def test_fine_tune_refuses_another_architecture(tmp_path, monkeypatch, gripdem_d
 def test_a_source_saved_before_an_option_existed_compares_with_its_default():
     """The shipped models predate ``edge_updates``: their encoder lacks the key, which means the
     encoder's default (True); a run with the default accepts them, one without refuses."""
-    encoder = {"name": "interaction", "channels": 64, "rounds": 4, "edge_history": 3}
+    encoder = {"name": "contact", "channels": 64, "rounds": 4, "edge_history": 3}
     source = {"encoder": dict(encoder), "horizon": 10}
     check_architecture(source, {"encoder": {**encoder, "edge_updates": True}, "horizon": 10}, "s")
     with pytest.raises(ValueError, match="encoder=.*edge_updates.: True"):

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
 
 from gripdem.evaluation.tensorboard_runs import read_runs
 from gripdem.inference.model_file import read_model_file
@@ -16,11 +17,14 @@ from gripdem.run import CONFIG_DIR
 from gripdem.runner.experiment import run_experiment
 from gripdem.runner.tensorboard_log import HP_METRICS
 
+ROOT = Path(__file__).resolve().parents[2]
+
 GROUPS = {
     "scene": ["pbc", "lebc"],
     "preset": ["tiny", "default", "paper"],
     "split": ["190-10", "180-20", "150-50", "100-100", "10-5", "custom"],
     "model": [
+        "contact",
         "interaction",
         "ensemble",
         "grip",
@@ -77,11 +81,11 @@ def test_custom_split_and_defaults():
     assert (default.scene.name, default.split.name, default.model.name) == (
         "pbc",
         "190-10",
-        "interaction",
+        "contact",
     )
     assert default.data.history_len == 10  # experiment=default is the default preset
     # a step budget: one simulation of the user's gets as many updates as the default six
-    # (the model's own: the lean interaction encoder takes twice the steps of the paper models)
+    # (the model's own: the lean contact encoder takes twice the steps of the paper models)
     assert (default.trainer.max_steps, default.trainer.max_epochs) == (3640, -1)
     # grip, pct and vct share the default model's form and budget (only the mode differs)
     assert compose_run(["model=vct"]).trainer.max_steps == 3640
@@ -123,8 +127,8 @@ def test_no_preset_sets_the_scene_the_split_or_the_data_size():
         assert not keys & {"scene", "split", "preset"}, path.name
 
 
-def test_the_interaction_encoder_refuses_the_paper_frame():
-    cfg = compose_run(["model=interaction", "model.encoding=sincos"], hydra_node=False)
+def test_the_contact_encoder_refuses_the_paper_frame():
+    cfg = compose_run(["model=contact", "model.encoding=sincos"], hydra_node=False)
     from gripdem.runner.config_schema import check_combination
 
     with pytest.raises(ValueError, match="exact frame"):
@@ -137,7 +141,7 @@ def test_the_ar_prior_refuses_the_paper_frame():
     cfg = compose_run(["model=grip_paper", "model.ar_prior=true"], hydra_node=False)
     with pytest.raises(ValueError, match="ar_prior"):
         check_combination(cfg)
-    assert compose_run(["model=interaction"]).model.ar_prior
+    assert compose_run(["model=contact"]).model.ar_prior
     assert not compose_run(["model=grip_paper"]).model.ar_prior
 
 
@@ -187,7 +191,7 @@ def run_in_events(out: Path):
 
 
 @pytest.mark.parametrize("scene", ["pbc", "lebc"])
-@pytest.mark.parametrize("model", ["interaction", "grip", "pct", "vct", "vct_paper"])
+@pytest.mark.parametrize("model", ["contact", "grip", "pct", "vct", "vct_paper"])
 def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request, scene, model):
     request.getfixturevalue(f"tiny_{scene}_path")  # generated once per session
     cfg, out, report = run_smoke(
@@ -255,24 +259,59 @@ def test_a_short_horizon_model_is_tested_chained_over_the_split(
     assert math.isfinite(metrics["test/rmse_ratio_constant_velocity"])
 
 
-def test_renamed_options_keep_working_for_one_release_with_one_line(caplog):
-    """experiment=fast is experiment=default, model.fast_steps is model.train_steps: the old
-    names compose the same run and print one line naming the new name."""
-    from gripdem.runner.config_schema import RENAMED, apply_deprecated_names, check_combination
+#: every renamed option: (old overrides, the same run under the new names)
+RENAMES = {
+    "experiment=fast": (["experiment=fast"], ["experiment=default"]),
+    "model.fast_steps": (["model.fast_steps=7"], ["model.train_steps=7"]),
+    "model=interaction": (["model=interaction"], ["model=contact"]),
+    "model/encoder=interaction": (
+        ["model=grip", "model/encoder=interaction"],
+        ["model=grip", "model/encoder=contact"],
+    ),
+    "model.encoder.name=interaction": (
+        ["model.encoder.name=interaction"],
+        ["model.encoder.name=contact"],
+    ),
+    "data.protocol=paper": (["data.protocol=paper"], ["data.protocol=in_sample"]),
+    "data.paper_windows": (["data.paper_windows=3"], ["data.in_sample_windows=3"]),
+}
 
-    new, old = compose_run(["experiment=default"]), compose_run(["experiment=fast"])
-    strip = ("hydra",)
-    assert {k: v for k, v in old.items() if k not in strip} == {
-        k: v for k, v in new.items() if k not in strip
+
+@pytest.mark.parametrize("old_name", RENAMES)
+def test_renamed_options_keep_working_for_one_release_with_one_line(old_name, caplog):
+    """Each old name composes the same run as its new name and prints one line naming the new
+    one; the new names are quiet; every rename is listed on the configuration page."""
+    from gripdem.runner.config_schema import check_combination
+    from gripdem.runner.renamed_options import PRINTED, RENAMED, apply_deprecated_names
+
+    PRINTED.clear()
+    old_overrides, new_overrides = RENAMES[old_name]
+    old, new = compose_run(old_overrides), compose_run(new_overrides)
+    with caplog.at_level("WARNING"):
+        assert apply_deprecated_names(old) == [old_name]
+    assert apply_deprecated_names(new) == []
+    warnings = [r.getMessage() for r in caplog.records if "deprecated" in r.getMessage()]
+    assert warnings == [
+        f"{old_name} is deprecated: use {RENAMED[old_name][0]} (the old name goes in gripdem "
+        f"{RENAMED[old_name][1]})"
+    ]
+
+    def plain(cfg):
+        return OmegaConf.to_container(cfg, resolve=False, enum_to_str=True)
+
+    assert {k: v for k, v in plain(old).items() if k != "hydra"} == {
+        k: v for k, v in plain(new).items() if k != "hydra"
     }
-    with caplog.at_level("WARNING"):
-        check_combination(old)
-    assert "experiment=fast is deprecated: use experiment=default" in caplog.text
     caplog.clear()
-    renamed = compose_run(["model.fast_steps=7"])
     with caplog.at_level("WARNING"):
-        assert apply_deprecated_names(renamed) == ["model.fast_steps"]
-    assert renamed.model.train_steps == 7 and renamed.trainer.max_steps == 7
-    assert "model.fast_steps is deprecated: use model.train_steps" in caplog.text
-    assert apply_deprecated_names(compose_run([])) == []  # the new names are quiet
-    assert set(RENAMED) == {"experiment=fast", "model.fast_steps"}
+        check_combination(old)  # the whole check runs on the renamed config
+        check_combination(compose_run(old_overrides), notes=False)  # a sweep's next job
+    assert "deprecated" not in caplog.text  # one line per process
+    page = (ROOT / "docs" / "reference" / "configuration.md").read_text()
+    assert f"| `{old_name}` | `{RENAMED[old_name][0]}` |" in page
+
+
+def test_every_rename_is_tested():
+    from gripdem.runner.renamed_options import RENAMED
+
+    assert set(RENAMED) == set(RENAMES)

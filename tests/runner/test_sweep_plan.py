@@ -63,7 +63,7 @@ def test_a_bad_job_of_a_sweep_is_named_before_any_job_runs(tmp_path):
 
 def test_decoder_modes_differ_only_in_the_mode():
     """model=grip,pct,vct is a fair sweep: same encoder, decoder, budget and data; the default
-    model (interaction) is grip under its own name."""
+    model (contact) is grip under its own name."""
     from gripdem.runner.outputs import plain
 
     models = {m: plain(compose_run([f"model={m}"]).model) for m in ("grip", "pct", "vct")}
@@ -71,9 +71,9 @@ def test_decoder_modes_differ_only_in_the_mode():
     for m, cfg in models.items():
         assert cfg.pop("name") == m and cfg.pop("decoder_mode") == m
     assert models["grip"] == models["pct"] == models["vct"]
-    assert default.pop("name") == "interaction" and default.pop("decoder_mode") == "grip"
+    assert default.pop("name") == "contact" and default.pop("decoder_mode") == "grip"
     assert default == models["grip"]
-    assert models["grip"]["encoder"]["name"] == "interaction"
+    assert models["grip"]["encoder"]["name"] == "contact"
     assert models["grip"]["decoder"] == "direct" and models["grip"]["horizon"] == 10
     budgets = {compose_run([f"model={m}"]).trainer.max_steps for m in ("grip", "pct", "vct")}
     assert budgets == {3640}

@@ -132,7 +132,7 @@ def on_face_data(lees_edwards: bool, n_sims: int = 3, k: int = 3, f: int = 4) ->
 
 
 @pytest.mark.parametrize("lees_edwards", [True, False])
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
+@pytest.mark.parametrize("model_name", ["contact", "grip"])
 def test_particles_exactly_on_faces(tmp_path, lees_edwards, model_name):
     """Tried: 8 particles exactly on the lower faces, edges and corners, just below the upper
     faces and exactly on +lx/2, at the last observed frame, moving out through the faces they

@@ -33,15 +33,15 @@ from gripdem.evaluation.metrics import rmse
 # --------------------------------------------------------------------------------------------
 #: bf16 keeps 8 significant bits (relative rounding 2^-9): what the network adds to constant
 #: velocity may change by 4 % under autocast (measured under ATEN_CPU_CAPABILITY=default|avx2|
-#: avx512, 1 and 2 threads: grip 0.31 %, the lean interaction encoder 1.5 % pbc and 2.5 % lebc),
+#: avx512, 1 and 2 threads: grip 0.31 %, the lean contact encoder 1.5 % pbc and 2.5 % lebc),
 #: and the RMSE by 1 %
 BF16_CORRECTION_TOLERANCE = 0.04
 BF16_RMSE_TOLERANCE = 0.01
-PERTURB_SCALE = {"interaction": 0.1, "graph_conv_gru": 0.05}
+PERTURB_SCALE = {"contact": 0.1, "graph_conv_gru": 0.05}
 #: the default model, and the paper's encoder with GRU heads in the exact frame (the form the
 #: decoder modes had before they moved to the default encoder; "grip" in the measurement above)
 MODEL_OVERRIDES = {
-    "interaction": ["model=interaction"],
+    "contact": ["model=contact"],
     "graph_conv_gru": [
         "model=grip",
         "model/encoder=graph_conv",
@@ -55,7 +55,7 @@ MODEL_OVERRIDES = {
 
 
 @pytest.mark.parametrize("scene", ["pbc", "lebc"])
-@pytest.mark.parametrize("model_name", ["interaction", "graph_conv_gru"])
+@pytest.mark.parametrize("model_name", ["contact", "graph_conv_gru"])
 def test_bf16_autocast_on_cpu_stays_within_tolerance_of_float32(request, scene, model_name):
     """Tried: the test windows of a perturbed model (every weight moved, so the network's
     output matters) run under ``torch.autocast("cpu", bfloat16)``; decoding stays float64.
@@ -144,7 +144,7 @@ def inf_into_gradient(module, batch):
     next(p for p in module.parameters() if p.grad is not None).grad.fill_(math.inf)
 
 
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
+@pytest.mark.parametrize("model_name", ["contact", "grip"])
 def test_nan_injected_into_a_training_batch_stops_at_that_step(tiny_pbc_path, model_name):
     """Tried: a NaN written into one input step of the batch of global step 3, during a real
     Lightning fit (gradient clipping on, as the presets have it).
@@ -156,7 +156,7 @@ def test_nan_injected_into_a_training_batch_stops_at_that_step(tiny_pbc_path, mo
         fit(model.train(), dm, AtStep(3, "batch", nan_into_batch))
 
 
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
+@pytest.mark.parametrize("model_name", ["contact", "grip"])
 def test_infinite_gradient_stops_at_its_step_before_the_weights_change(tiny_pbc_path, model_name):
     """Tried: one parameter's gradient overflowed to +inf after the backward pass of global
     step 2 while the loss stayed finite (clipping on: an infinite norm clips to NaN).
@@ -168,7 +168,7 @@ def test_infinite_gradient_stops_at_its_step_before_the_weights_change(tiny_pbc_
     assert all(torch.isfinite(p).all() for p in model.parameters())
 
 
-@pytest.mark.parametrize("model_name", ["interaction", "grip"])
+@pytest.mark.parametrize("model_name", ["contact", "grip"])
 def test_exploding_weights_stop_with_the_step_named(tiny_pbc_path, model_name):
     """Tried: a learning rate of 1e30 (Adam moves every weight by ~1e30 per step).
     Held: training stops within a few steps with a FloatingPointError naming the global step

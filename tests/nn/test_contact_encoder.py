@@ -1,4 +1,4 @@
-"""The interaction-aware encoder: permutation equivariance, invariance to an LE-consistent shift
+"""The contact-aware encoder: permutation equivariance, invariance to an LE-consistent shift
 of the whole configuration, any particle count, contact-scale gap features."""
 
 import numpy as np
@@ -10,7 +10,7 @@ from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.data.dataset_io import read_dataset, write_dataset
 from gripdem.data.schema import TrajectoryData
 from gripdem.models.module import TrajectoryModule
-from gripdem.nn.interaction import ContactGraph, InteractionEncoder, gap_features
+from gripdem.nn.contact import ContactEncoder, ContactGraph, gap_features
 
 
 def random_contacts(batch, particles, pairs, seed=0):
@@ -29,7 +29,7 @@ def random_contacts(batch, particles, pairs, seed=0):
 
 def test_encoder_is_permutation_equivariant_for_any_particle_count():
     torch.manual_seed(0)
-    encoder = InteractionEncoder(history_len=5, static_features=2, channels=16, rounds=3)
+    encoder = ContactEncoder(history_len=5, static_features=2, channels=16, rounds=3)
     for n in (7, 40):
         b = 2
         graph = random_contacts(b, n, 6 * n)
@@ -93,7 +93,7 @@ def _features(path, model_kw):
         encoding="unwrapped",
         horizon=5,
         history_len=5,
-        encoder={"name": "interaction", "channels": 16, "rounds": 2, **model_kw},
+        encoder={"name": "contact", "channels": 16, "rounds": 2, **model_kw},
         hidden=8,
         graph_cutoff=1.5,
     ).eval()
@@ -134,7 +134,7 @@ def test_chunked_rounds_equal_the_unchunked(edge_updates):
     """Edges in blocks (no gradients: the inference path) give the same output as all edges at
     once, for blocks that do and do not divide the edge count, with and without edge updates."""
     torch.manual_seed(0)
-    encoder = InteractionEncoder(
+    encoder = ContactEncoder(
         history_len=5, channels=16, rounds=3, edge_updates=edge_updates, pair_channels=8
     ).eval()
     graph = random_contacts(2, 50, 300)  # 600 edges
@@ -155,12 +155,12 @@ def test_chunked_rounds_equal_the_unchunked(edge_updates):
 
 
 def test_narrow_pair_channels_keep_the_node_latents():
-    encoder = InteractionEncoder(history_len=4, channels=32, rounds=2, pair_channels=8)
+    encoder = ContactEncoder(history_len=4, channels=32, rounds=2, pair_channels=8)
     out = encoder(torch.randn(1, 20, 4, 3), None, random_contacts(1, 20, 80))
     assert out.shape == (1, 20, 1, 32) and encoder.out_channels == 32
     assert encoder.message[0].out.out_features == 8 and encoder.edge_in[-1].out_features == 8
     with pytest.raises(ValueError, match="pair_channels"):
-        InteractionEncoder(history_len=4, pair_channels=0)
+        ContactEncoder(history_len=4, pair_channels=0)
 
 
 #: bf16 keeps 8 significant bits: one rounding is 2^-9 = 0.2 % relative; through 4 rounds of
@@ -174,7 +174,7 @@ def test_bf16_encoder_stays_within_its_stated_tolerance_of_fp32():
     property of the format) against fp32: the output is fp32 again and within BF16_TOLERANCE of
     the fp32 output's scale."""
     torch.manual_seed(0)
-    encoder = InteractionEncoder(
+    encoder = ContactEncoder(
         history_len=5, channels=32, rounds=4, edge_updates=False, pair_channels=16
     ).eval()
     graph = random_contacts(1, 200, 1800)

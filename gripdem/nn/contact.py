@@ -1,4 +1,4 @@
-"""Interaction-aware encoder: learned messages from the relative geometry and motion of pairs.
+"""Contact-aware encoder: learned messages from the relative geometry and motion of pairs.
 
 The paper's graph operation averages neighbours' features with scalar weights, so it cannot
 express "pushed away from neighbour j along r_ij". In these overdamped suspensions a particle's
@@ -47,7 +47,7 @@ COHESION_GAP_SCALE = 0.1
 #: smallest gap resolved by the signed-log transform (contact overlaps are ~1e-5 d)
 LOG_GAP_FLOOR = 1e-5
 LOG_GAP_RANGE = math.log1p(1e-1 / LOG_GAP_FLOOR)
-#: where an ensemble member's latent noise enters (see InteractionEncoder)
+#: where an ensemble member's latent noise enters (see ContactEncoder)
 NOISE_INTO = ("rounds", "input", "head")
 
 
@@ -117,7 +117,7 @@ class PairMLP(nn.Module):
         return self.edges(self.node_terms(h), x, edge_index)
 
 
-class InteractionEncoder(nn.Module):
+class ContactEncoder(nn.Module):
     """Message passing on the contact graph (see module docstring).
 
     Args:
@@ -165,7 +165,7 @@ class InteractionEncoder(nn.Module):
     ):
         super().__init__()
         if rounds < 1:
-            raise ValueError(f"interaction encoder needs rounds >= 1, got {rounds}")
+            raise ValueError(f"contact encoder needs rounds >= 1, got {rounds}")
         self.history_len = int(history_len)
         self.static_features = int(static_features)
         self.edge_history = max(1, min(int(edge_history), self.history_len))

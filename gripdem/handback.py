@@ -66,7 +66,7 @@ def handback(args: argparse.Namespace) -> list[str]:
         lammps_axes,
         trajectory_dump_text,
     )
-    from gripdem.formats.lammps_dump import write_dump
+    from gripdem.formats.lammps.dump import write_dump
 
     outputs = [p for p in (args.data_file, args.xyz, args.dump) if p]
     if not outputs:

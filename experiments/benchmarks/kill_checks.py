@@ -150,7 +150,7 @@ def _lammps_data(path: Path) -> None:
 
 
 def _dump(path: Path) -> None:
-    from gripdem.formats.lammps_dump import read_dump
+    from gripdem.formats.lammps.dump import read_dump
 
     for _ in read_dump(path):
         pass

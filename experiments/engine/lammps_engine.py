@@ -42,8 +42,8 @@ import numpy as np
 
 from gripdem.boundary import lattice_continuous_steps, minimum_image
 from gripdem.data.dataset_io import read_dataset
-from gripdem.formats.lammps_dump import read_dump
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.dump import read_dump
+from gripdem.formats.lammps.series import AxisMap
 
 SHEAR_RATE = 0.1
 TIMESTEP = 0.005

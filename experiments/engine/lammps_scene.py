@@ -70,7 +70,7 @@ from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.packing import random_packing
 from gripdem.dem.params import TANGENTIAL_MASS_FACTOR, damping_ratio
 from gripdem.dem.scenes import initial_velocities
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.series import AxisMap
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from benchlib import load_yaml  # noqa: E402

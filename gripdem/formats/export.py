@@ -45,8 +45,8 @@ from gripdem.boundary import Box, wrap_into_sheared_cell
 from gripdem.data.h5io import atomic_write_text
 from gripdem.evaluation import metrics
 from gripdem.evaluation.predictions import Predictions, read_predictions
-from gripdem.formats.lammps_dump import dump_text
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.dump import dump_text
+from gripdem.formats.lammps.series import AxisMap
 
 FLOAT = "%.12g"
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from gripdem.boundary import lattice_continuous_steps, wrap_into_sheared_cell
 from gripdem.data.schema import TrajectoryData
-from gripdem.formats.lammps_dump import FLOAT, dump_text
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.dump import FLOAT, dump_text
+from gripdem.formats.lammps.series import AxisMap
 
 
 def find_value(tree: Any, key: str) -> Any:

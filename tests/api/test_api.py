@@ -257,8 +257,8 @@ def test_the_exceptions_form_one_documented_hierarchy():
         assert issubclass(cls, gripdem.GripdemError) and f"`{name}`" in page, name
         if name in builtin:
             assert issubclass(cls, builtin[name]), name
-    from gripdem.formats.fordatis_files import FordatisError
-    from gripdem.formats.lammps_dump import DumpError
+    from gripdem.formats.fordatis.files import FordatisError
+    from gripdem.formats.lammps.dump import DumpError
 
     assert issubclass(DumpError, gripdem.DatasetError)
     assert issubclass(FordatisError, gripdem.DatasetError)

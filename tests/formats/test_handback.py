@@ -11,7 +11,7 @@ import pytest
 from gripdem.boundary import minimum_image, wrap_positions
 from gripdem.convert import main as convert
 from gripdem.data.dataset_io import read_dataset
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.series import AxisMap
 from gripdem.handback import main
 
 YZX = AxisMap.parse("yzx")

@@ -19,7 +19,7 @@ from gripdem.boundary import Box, LeesEdwards, minimum_image, wrap_into_sheared_
 from gripdem.convert import main
 from gripdem.data.dataset_io import read_dataset
 from gripdem.formats.lammps import read_lammps
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.series import AxisMap
 
 D = 1.0e-3  # diameter (any units: the importer keeps the dump's)
 BOX = Box(8 * D, 7 * D, 9 * D)  # ours; not cubic

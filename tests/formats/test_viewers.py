@@ -26,7 +26,7 @@ from gripdem.data.dataset_io import read_dataset
 from gripdem.evaluation.physics import coordination_numbers
 from gripdem.evaluation.predictions import Predictions
 from gripdem.formats.export import export_extxyz, export_lammps
-from gripdem.formats.lammps_series import AxisMap
+from gripdem.formats.lammps.series import AxisMap
 from gripdem.handback import main as handback
 
 #: frames of simulation 0 used: observed frame 9, then a horizon of 5; the hand-back's state

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from gripdem.convert import main as convert
 from gripdem.data.dataset_io import read_dataset
-from gripdem.formats.lammps_dump import dump_text
+from gripdem.formats.lammps.dump import dump_text
 
 VALUES = [np.nan, np.inf, -np.inf, 1e308, -1e308, 0.0, 1e-300, 7.5, -3.0]
 

@@ -2,7 +2,7 @@
 
 LAMMPS's restricted triclinic cell ``a = (Lx, 0, 0), b = (xy, Ly, 0), c = (xz, yz, Lz)`` with one
 tilt factor ``t`` is gripdem's LE lattice ``(lx, 0, delta), (0, ly, 0), (0, 0, lz)`` once the axes
-are permuted (:class:`~gripdem.formats.lammps_series.AxisMap`), with ``delta = t`` (mod lz). A box
+are permuted (:class:`~gripdem.formats.lammps.series.AxisMap`), with ``delta = t`` (mod lz). A box
 flip (``fix deform ... flip yes``) changes the tilt by one flow length, which is the same
 lattice. :func:`tilt_lees_edwards` undoes the flips, fits the continuous tilt against time
 (rate ``sign * shear_rate * lx``, zero at the time origin), checks the fit, the given options
@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from gripdem.boundary import Box, LeesEdwards, wrap_coordinate
-from gripdem.formats.lammps_dump import DumpError
-from gripdem.formats.lammps_series import DumpSeries
+from gripdem.formats.lammps.dump import DumpError
+from gripdem.formats.lammps.series import DumpSeries
 from gripdem.formats.le_inference import SMALL_FACTOR, SMALL_FLOOR, Crossings, LeEvidence
 
 #: the continuous tilt must lie on a line in time within this fraction of the flow length

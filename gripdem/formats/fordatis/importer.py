@@ -44,7 +44,7 @@ from gripdem._version import __version__
 from gripdem.boundary import Boundary, Box, check_volume_fraction, wrap_positions
 from gripdem.data.schema import TIME_RTOL, TrajectoryData, validate
 from gripdem.formats.drive import check_amplitude, check_periodic, drive_lines
-from gripdem.formats.fordatis_files import (
+from gripdem.formats.fordatis.files import (
     BOX_RTOL,
     FordatisError,
     RawSimulation,

@@ -1,4 +1,4 @@
-"""Writing LAMMPS / LIGGGHTS text dumps (the format :mod:`gripdem.formats.lammps_dump` reads):
+"""Writing LAMMPS / LIGGGHTS text dumps (the format :mod:`gripdem.formats.lammps.dump` reads):
 the box bounds of a tilted cell, the dump text of a trajectory, and an atomic write (gzip
 when the name ends in ``.gz``). A dump written here reads back to the same float64 values.
 """

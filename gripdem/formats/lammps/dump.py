@@ -1,5 +1,5 @@
 """LAMMPS / LIGGGHTS text dumps: read snapshots as written (writing them:
-:mod:`gripdem.formats.lammps_write`).
+:mod:`gripdem.formats.lammps.write`).
 
 A dump is a sequence of snapshots, each a set of ``ITEM:`` blocks::
 
@@ -39,7 +39,7 @@ import numpy as np
 from gripdem.data.schema import DatasetError
 
 # the writers live in lammps_write; importable from here as before
-from gripdem.formats.lammps_write import FLOAT, bounds_of, dump_text, write_dump  # noqa: F401
+from gripdem.formats.lammps.write import FLOAT, bounds_of, dump_text, write_dump  # noqa: F401
 
 #: coordinate column sets, in the order of preference when a dump holds several
 COORDINATE_KINDS = {

@@ -5,7 +5,7 @@ the axis permutation between LAMMPS and gripdem.
 drops repeated snapshots with identical coordinates (a restarted run writes its first snapshot
 again), orders particles by ``id`` and checks what must not change between snapshots: the set
 of ids, the columns, the box (periodic, same lengths and origin; the tilt may change), equal
-TIMESTEP spacing. Errors are :class:`~gripdem.formats.lammps_dump.DumpError` naming the file and
+TIMESTEP spacing. Errors are :class:`~gripdem.formats.lammps.dump.DumpError` naming the file and
 the snapshot.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gripdem.formats.lammps_dump import COORDINATE_KINDS, VELOCITIES, DumpError, read_dump
+from gripdem.formats.lammps.dump import COORDINATE_KINDS, VELOCITIES, DumpError, read_dump
 
 #: box lengths and origins must agree between snapshots to this fraction of the box
 BOX_RTOL = 1e-6

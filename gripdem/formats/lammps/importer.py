@@ -50,9 +50,9 @@ from gripdem.boundary import (
 )
 from gripdem.data.schema import TrajectoryData, validate
 from gripdem.formats.drive import check_amplitude, check_periodic, drive_lines
-from gripdem.formats.lammps_dump import DumpError
-from gripdem.formats.lammps_series import AxisMap, DumpSeries, read_series
-from gripdem.formats.lammps_tilt import check_crossers, tilt_lees_edwards
+from gripdem.formats.lammps.dump import DumpError
+from gripdem.formats.lammps.series import AxisMap, DumpSeries, read_series
+from gripdem.formats.lammps.tilt import check_crossers, tilt_lees_edwards
 from gripdem.formats.le_inference import (
     LeEvidence,
     check_le_options,
@@ -164,7 +164,7 @@ def read_lammps(
     """Import LAMMPS text dumps; returns the validated dataset and a report. ``body_force``:
     the amplitude A of the periodic drive ``A cos(2 pi x / lx)`` along our z, in the dump's
     units (:mod:`gripdem.formats.drive`; periodic data only). Raises
-    :class:`~gripdem.formats.lammps_dump.DumpError` (a ``DatasetError``) naming the file, item
+    :class:`~gripdem.formats.lammps.dump.DumpError` (a ``DatasetError``) naming the file, item
     and snapshot, or ``ValueError`` for a bad option; nothing is written here."""
     _check_options(diameter, timestep, shear_rate, le_sign, time_origin)
     amplitude = check_amplitude(body_force)

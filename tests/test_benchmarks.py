@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow
 @pytest.fixture
 def run_script(run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
     """``run_script(name, *args) -> stdout`` of ``python experiments/<name>.py --quick``
-    (name: e.g. ``benchmarks/scaling``)."""
+    (name: e.g. ``benchmarks/model_cost/scaling``)."""
 
     def run(name: str, *args: str) -> str:
         proc = run_experiment_quick(name, *args)
@@ -26,7 +26,7 @@ def run_script(run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
 
 
 def test_time_vs_error_quick(run_script, tmp_path):
-    out = run_script("benchmarks/time_vs_error", "--out-dir", str(tmp_path))
+    out = run_script("benchmarks/end_to_end/time_vs_error", "--out-dir", str(tmp_path))
     assert "| DEM solver" in out and "| constant_velocity |" in out
     assert (tmp_path / "pareto_time_vs_error.png").stat().st_size > 0
     report = json.loads((tmp_path / "time_vs_error.json").read_text())
@@ -41,7 +41,7 @@ def test_time_vs_error_quick(run_script, tmp_path):
 
 
 def test_surrogate_quick(run_script, tmp_path):
-    out = run_script("benchmarks/surrogate_speed", "--json", str(tmp_path / "s.json"))
+    out = run_script("benchmarks/surrogate/surrogate_speed", "--json", str(tmp_path / "s.json"))
     report = json.loads((tmp_path / "s.json").read_text())
     assert {(r["scene"], r["particles"]) for r in report["rows"]} == {
         (s, n) for s in ("pbc", "lebc") for n in (400, 1600)
@@ -56,7 +56,7 @@ def test_surrogate_quick(run_script, tmp_path):
 def test_encoder_speed_quick(run_script, tmp_path):
     """Every lever's row; the chunked rounds give the unchunked output, bf16 stays within its
     stated tolerance of fp32 (the same weights and inputs)."""
-    run_script("benchmarks/encoder_speed", "--json", str(tmp_path / "e.json"))
+    run_script("benchmarks/model_cost/encoder_speed", "--json", str(tmp_path / "e.json"))
     rows = json.loads((tmp_path / "e.json").read_text())["rows"]
     assert {r["particles"] for r in rows} == {400, 1600}
     for row in rows:
@@ -68,7 +68,7 @@ def test_encoder_speed_quick(run_script, tmp_path):
 
 
 def test_scaling_quick(run_script, tmp_path):
-    run_script("benchmarks/scaling", "--json", str(tmp_path / "s.json"))
+    run_script("benchmarks/model_cost/scaling", "--json", str(tmp_path / "s.json"))
     rows = json.loads((tmp_path / "s.json").read_text())["rows"]
     forms = {r["op"] for r in rows if "seconds" in r}
     assert forms == {"sparse", "dense", "contact"}
@@ -76,7 +76,7 @@ def test_scaling_quick(run_script, tmp_path):
 
 
 def test_scene_cost_quick(run_script, tmp_path):
-    run_script("benchmarks/scene_cost", "--json", str(tmp_path / "s.json"))
+    run_script("benchmarks/model_cost/scene_cost", "--json", str(tmp_path / "s.json"))
     report = json.loads((tmp_path / "s.json").read_text())
     assert report["le_path_difference"] < 1e-12  # the LE path predicts the same positions
     assert [row[0] for row in report["dem"]][:3] == ["pbc", "lebc", "pbc via the LE path"]
@@ -84,7 +84,9 @@ def test_scene_cost_quick(run_script, tmp_path):
 
 def test_surrogate_rollout_quick(run_script, tmp_path):
     """Smoke ensembles of 3 members beside the smoke point models (the references)."""
-    out = run_script("benchmarks/surrogate_rollout", "--out-dir", str(tmp_path), "--members", "3")
+    out = run_script(
+        "benchmarks/surrogate/surrogate_rollout", "--out-dir", str(tmp_path), "--members", "3"
+    )
     report = json.loads((tmp_path / "surrogate_rollout.json").read_text())
     for scene in ("pbc", "lebc"):
         ensemble, reference = report["scenes"][scene], report["scenes"][f"{scene} (reference)"]
@@ -108,7 +110,7 @@ def test_surrogate_rollout_quick(run_script, tmp_path):
 
 
 def test_model_front_quick(run_script, tmp_path):
-    run_script("benchmarks/model_front", "--out-dir", str(tmp_path), "--links", "5", "1")
+    run_script("benchmarks/surrogate/model_front", "--out-dir", str(tmp_path), "--links", "5", "1")
     rows = json.loads((tmp_path / "model_front.json").read_text())
     assert len(rows) == 2 and all(r["weights"] > 0 for r in rows)
     assert all(set(r["timing"]) == {"1t/link5", "1t/link1"} for r in rows)

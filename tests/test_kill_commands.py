@@ -1,6 +1,6 @@
 """Issue 24 (slow tier): every command killed at a random moment, by SIGKILL, SIGTERM or
 Ctrl-C, leaves no process running and no half-written file, and the same command then works
-(``experiments/benchmarks/kill_commands.py --quick``: 3 kills of each command)."""
+(``experiments/benchmarks/robustness/kill_commands.py --quick``: 3 kills of each command)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ pytestmark = pytest.mark.slow
 
 
 def test_killed_commands_leave_nothing_behind(run_experiment_quick, tmp_path):
-    proc = run_experiment_quick("benchmarks/kill_commands", "--out-dir", str(tmp_path))
+    proc = run_experiment_quick("benchmarks/robustness/kill_commands", "--out-dir", str(tmp_path))
     report = json.loads((tmp_path / "kill_commands.json").read_text())
     rows = report["rows"]
     assert {r["command"] for r in rows} == {

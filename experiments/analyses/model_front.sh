@@ -2,7 +2,7 @@
 # The model-size grid behind experiments/results/model_front.md (the time-vs-error front):
 # the default scene of each given scene, split 190-10, the fast preset, seed 0, one run per
 # configuration, trained one after the other (each uses both cores), then measured by
-# experiments/benchmarks/model_front.py.
+# experiments/benchmarks/surrogate/model_front.py.
 #   bash experiments/analyses/model_front.sh [OUT=multirun/front] [SCENES="pbc lebc"]
 set -euo pipefail
 out=${1:-multirun/front}
@@ -31,4 +31,4 @@ for scene in $scenes; do
     runs+=("$dir")
   done
 done
-"$python" experiments/benchmarks/model_front.py "${runs[@]}" --threads 1 2 --links 10 1
+"$python" experiments/benchmarks/surrogate/model_front.py "${runs[@]}" --threads 1 2 --links 10 1

@@ -9,8 +9,12 @@
 - :func:`scene_dataset`: the built-in dataset of a scene and preset (from the cache; generated
   there if missing, as ``python -m gripdem.run`` would).
 
-Scripts import it as a sibling module (``python experiments/<name>.py`` puts ``experiments/``
-first on ``sys.path``).
+The scripts live in one folder per question (``GROUPS``): ``end_to_end/`` (the mission's
+command, run time against error), ``surrogate/`` (the surrogate against the DEM and LAMMPS),
+``model_cost/`` (where a forward pass and a training step spend their time, and how they
+scale) and ``robustness/`` (killed commands, stress). A script puts this folder on
+``sys.path`` and imports this module, which puts every group's folder there too, so a script
+imports another group's module by its name (``from time_vs_error import find_runs``).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import ctypes
 import os
 import platform
+import sys
 import threading
 import time
 from pathlib import Path
@@ -28,6 +33,12 @@ import yaml
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
 GIB = 2**30
+#: the benchmark scripts' folders, one per question (see the module doc)
+GROUPS = ("end_to_end", "surrogate", "model_cost", "robustness")
+for _group in GROUPS:
+    _folder = str(Path(__file__).resolve().parent / _group)
+    if _folder not in sys.path:
+        sys.path.append(_folder)
 
 
 def cpu_model() -> str:

@@ -33,7 +33,13 @@ from gripdem.data.encodings import ENCODINGS, Encoding, make_encoding
 from gripdem.data.frames import FrameStore
 from gripdem.data.graph import DEFAULT_ALPHA
 from gripdem.data.normalizer import Normalizer
-from gripdem.data.protocols import PARTS, WindowPlan, current_protocol, plan_windows
+from gripdem.data.protocols import (
+    PARTS,
+    RENAMED_PLAN_OPTIONS,
+    WindowPlan,
+    current_protocol,
+    plan_windows,
+)
 from gripdem.data.resumable import ResumableLoader
 from gripdem.data.schema import DatasetError, DatasetMeta
 from gripdem.data.windows import Split
@@ -151,6 +157,10 @@ class TrajectoryDataModule(L.LightningDataModule):
         by the runner)."""
         data, split = _plain(data), _plain(split)
         kwargs = {k: v for k, v in data.items() if not str(k).startswith("_")}
+        for old, new in RENAMED_PLAN_OPTIONS.items():  # a run's config saved before the rename
+            value = kwargs.pop(old, None)
+            if value is not None:
+                kwargs[new] = value
         kwargs.update(overrides)
         if isinstance(split, Mapping):
             split = {"history": split.get("history"), "horizon": split.get("horizon")}

@@ -33,6 +33,8 @@ PROTOCOLS = ("sims", "time", "in_sample", "auto")
 #: former protocol names (``paper`` until gripdem 0.1: the word also names the paper's models,
 #: preset and claims): old -> new; the old name works until 0.2.0 and warns
 RENAMED_PROTOCOLS = {"paper": "in_sample"}
+#: former option names of the window plan: old -> new (a config saved before the rename)
+RENAMED_PLAN_OPTIONS = {"paper_windows": "in_sample_windows"}
 
 
 PARTS = ("train", "val", "test")

@@ -146,8 +146,9 @@ class ContactEncoder(nn.Module):
     """
 
     #: edges per block of a round without gradients: the block's edge latents stay in cache
-    #: (experiments/benchmarks/encoder_speed.py --chunks: 1024-8192 the same within noise, 2.3x
-    #: faster than all at once at 32 000 particles, 16 384 slower); 0 processes all at once
+    #: (experiments/benchmarks/model_cost/encoder_speed.py --chunks: 1024-8192 the same within
+    #: noise, 2.3x faster than all at once at 32 000 particles, 16 384 slower); 0 processes all
+    #: at once
     EDGE_CHUNK = 4096
 
     def __init__(

@@ -19,7 +19,8 @@ matrix products and the memory traffic of its gate arithmetic, which batching do
 what made the decoder modes fast is the direct decoder (no loop, :mod:`gripdem.nn.direct`).
 
 Equal to the reference to float round-off (tested, and side by side in
-``experiments/benchmarks/decoder_loop.py``); dropout between layers draws other random numbers.
+``experiments/benchmarks/model_cost/decoder_loop.py``); dropout between layers draws other random
+numbers.
 """
 
 from __future__ import annotations

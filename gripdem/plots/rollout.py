@@ -1,7 +1,7 @@
 """The surrogate figure of a long rollout, drawn from its computed report (the JSON of
-``experiments/benchmarks/surrogate_rollout.py``: per-frame RMSE of the model and the baselines,
-per-frame overlap, per-block statistics from :mod:`gripdem.evaluation.rollout_stats`, and the
-noise floor of two independent DEM simulations).
+``experiments/benchmarks/surrogate/surrogate_rollout.py``: per-frame RMSE of the model and the
+baselines, per-frame overlap, per-block statistics from :mod:`gripdem.evaluation.rollout_stats`,
+and the noise floor of two independent DEM simulations).
 
 Six panels: RMSE / d over the first frames (model, constant velocity, linear AR); the overlap
 fraction per frame (model, truth, the 1 % target); the g(r) L1 distance per block; the

@@ -81,11 +81,8 @@ def resolve_data_path(cfg: DictConfig) -> Path:
 
 
 def build_datamodule(cfg: DictConfig, path: Path) -> TrajectoryDataModule:
-    data = plain(cfg.data)
-    if data.pop("paper_windows", None) is not None:  # check_combination carries it over first
-        raise ValueError("data.paper_windows is deprecated: use data.in_sample_windows")
     dm = TrajectoryDataModule.from_config(
-        data, plain(cfg.split), path=str(path), seed=int(cfg.seed)
+        plain(cfg.data), plain(cfg.split), path=str(path), seed=int(cfg.seed)
     )
     dm.setup("fit")
     return dm

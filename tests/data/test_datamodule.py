@@ -207,6 +207,12 @@ def test_from_config_composes_the_yaml_groups(le_path):
         5,
     )
     assert summary["protocol"] == "time" and dm.expect_boundary == "lees_edwards"
+    # a run's config saved before gripdem 0.1's renames: protocol paper, paper_windows
+    cfg.data.protocol, cfg.data.paper_windows = "paper", 2
+    del cfg.data["in_sample_windows"]
+    with pytest.warns(DeprecationWarning, match="protocol 'paper'"):
+        old = TrajectoryDataModule.from_config(cfg.data, cfg.split, path=le_path)
+    assert old.plan_args["protocol"] == "in_sample" and old.plan_args["in_sample_windows"] == 2
 
 
 class _Probe(L.LightningModule):

@@ -165,7 +165,7 @@ def test_narrow_pair_channels_keep_the_node_latents():
 
 #: bf16 keeps 8 significant bits: one rounding is 2^-9 = 0.2 % relative; through 4 rounds of
 #: residual MLPs the largest output deviation measured 0.8-0.9 % of the largest output (random
-#: weights, experiments/benchmarks/encoder_speed.py); 3 % bounds it with margin
+#: weights, experiments/benchmarks/model_cost/encoder_speed.py); 3 % bounds it with margin
 BF16_TOLERANCE = 0.03
 
 

@@ -1,6 +1,6 @@
 """Numerical-stability stress suite, fast cases (1/2): DEM time steps, particles exactly on the
 faces, LE offsets and DEM restarts at very late absolute times, sin/cos pairs far off the unit
-circle. The slow cases run in ``experiments/benchmarks/stress.py``.
+circle. The slow cases run in ``experiments/benchmarks/robustness/stress.py``.
 
 Every test's docstring says what was tried and what must hold. Real components throughout: the
 built-in DEM, real HDF5 files, models built by :mod:`gripdem.runner.experiment`. Models that are

@@ -1,6 +1,6 @@
 """Numerical-stability stress suite, fast cases (2/2): bf16 autocast, SI units against a unit
 box, NaN and infinite gradients during training, exploding weights; and the slow cases of
-``experiments/benchmarks/stress.py`` in its ``--quick`` mode (slow tier).
+``experiments/benchmarks/robustness/stress.py`` in its ``--quick`` mode (slow tier).
 
 Models are trained by a real Lightning Trainer where training matters, else perturbed
 (``tests/support/stress_models.py``).
@@ -179,7 +179,7 @@ def test_exploding_weights_stop_with_the_step_named(tiny_pbc_path, model_name):
 
 
 # --------------------------------------------------------------------------------------------
-# the slow cases: experiments/benchmarks/stress.py --quick
+# the slow cases: experiments/benchmarks/robustness/stress.py --quick
 # --------------------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_stress_script_quick(tmp_path, run_experiment_quick, tiny_pbc_path, tiny_lebc_path):
@@ -187,7 +187,7 @@ def test_stress_script_quick(tmp_path, run_experiment_quick, tiny_pbc_path, tiny
     models: the script's quick mode runs (on the session's tiny datasets) and every case
     holds."""
     out = tmp_path / "stress.json"
-    proc = run_experiment_quick("benchmarks/stress", "--json", str(out))
+    proc = run_experiment_quick("benchmarks/robustness/stress", "--json", str(out))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "machine:" in proc.stdout and "torch" in proc.stdout
     report = json.loads(out.read_text())

@@ -5,7 +5,7 @@ particles (O(n) scaling: particle-steps/s should stay flat), and the wall time o
 2000-particle x 201-frame simulation (spin-up included) per scene; ``--dataset`` also times
 the whole default dataset (all its simulations, in worker processes).
 
-    python experiments/benchmarks/dem_speed.py [--sizes 500 2000 8000] [--scenes lebc pbc]
+    python experiments/benchmarks/surrogate/dem_speed.py [--sizes 500 2000 8000] [--scenes lebc pbc]
         [--backend numba|torch --device cpu|cuda] [--no-full] [--dataset] [--json out.json]
 
 Timings depend on what else runs on the machine: the load average is printed with them.
@@ -30,7 +30,7 @@ from gripdem.dem.output import generate_dataset
 from gripdem.dem.packing import random_packing
 from gripdem.dem.scenes import initial_velocities, simulate_one
 
-CONF = Path(__file__).resolve().parents[2] / "conf"
+CONF = Path(__file__).resolve().parents[3] / "conf"
 
 
 def load(scene: str, preset: str = "default", **overrides) -> GeneratorConfig:

@@ -1,8 +1,9 @@
 """Numerical-stability stress cases too slow for the test suite (the fast ones are in
 ``tests/stress/``). Each case says what was tried, whether it held, and what was measured.
 
-    python experiments/benchmarks/stress.py --quick        # smoke models trained here (minutes)
-    python experiments/benchmarks/stress.py RUN_OR_SWEEP_DIR... [--frames 1000] [--windows N]
+    python experiments/benchmarks/robustness/stress.py --quick   # smoke models trained here
+    python experiments/benchmarks/robustness/stress.py RUN_OR_SWEEP_DIR... [--frames 1000] \
+        [--windows N]
         [--rollout-splits 190-10 100-100] [--rollout-scenes pbc lebc] [--json F]
 
 Cases:
@@ -39,17 +40,19 @@ from pathlib import Path
 import h5py
 import numpy as np
 import torch
-from benchlib import machine_line, markdown_table, scene_dataset, set_threads, train_run
-from time_vs_error import find_runs, load_run
-from time_vs_error_timing import test_windows
 
-from gripdem.boundary import minimum_image
-from gripdem.data.batch import collate_windows
-from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset
-from gripdem.data.units import rescale
-from gripdem.evaluation.metrics import position_residuals, rmse
-from gripdem.inference.checkpoint import load_checkpoint_model, load_model
-from gripdem.inference.rollout import rollout
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import machine_line, markdown_table, scene_dataset, set_threads, train_run  # noqa: E402
+from time_vs_error import find_runs, load_run  # noqa: E402
+from time_vs_error_timing import test_windows  # noqa: E402
+
+from gripdem.boundary import minimum_image  # noqa: E402
+from gripdem.data.batch import collate_windows  # noqa: E402
+from gripdem.data.dataset_io import read_dataset, read_meta, write_dataset  # noqa: E402
+from gripdem.data.units import rescale  # noqa: E402
+from gripdem.evaluation.metrics import position_residuals, rmse  # noqa: E402
+from gripdem.inference.checkpoint import load_checkpoint_model, load_model  # noqa: E402
+from gripdem.inference.rollout import rollout  # noqa: E402
 
 BF16_CORRECTION_TOLERANCE = 0.02
 BF16_RMSE_TOLERANCE = 0.01

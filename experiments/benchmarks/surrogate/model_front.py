@@ -1,8 +1,8 @@
 """The time-vs-error front of model sizes: which model gives which accuracy at which speed?
 
-    python experiments/benchmarks/model_front.py RUN_DIR... [--frames 60] [--threads 1 2]
+    python experiments/benchmarks/surrogate/model_front.py RUN_DIR... [--frames 60] [--threads 1 2]
         [--links 10 1] [--out-dir experiments/results] [--name model_front]
-    python experiments/benchmarks/model_front.py --quick      # two smoke models, tiny scene
+    python experiments/benchmarks/surrogate/model_front.py --quick   # two smoke models, tiny scene
 
 Every ``RUN_DIR`` is a ``python -m gripdem.run`` output directory of one configuration (width,
 message rounds, cut-off, history, decoder; trained on the same data with the same budget:
@@ -27,13 +27,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 import torch
-from benchlib import fmt, machine_line, markdown_table, set_threads, train_run
-from surrogate_handback import dem_seconds_per_frame, generator_config
 
-from gripdem.data.dataset_io import read_meta
-from gripdem.inference.checkpoint import load_model
-from gripdem.inference.stepper import PARTS, Stepper, StepperSettings
-from gripdem.plots.common import new_figure, save_figure
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import fmt, machine_line, markdown_table, set_threads, train_run  # noqa: E402
+from surrogate_handback import dem_seconds_per_frame, generator_config  # noqa: E402
+
+from gripdem.data.dataset_io import read_meta  # noqa: E402
+from gripdem.inference.checkpoint import load_model  # noqa: E402
+from gripdem.inference.stepper import PARTS, Stepper, StepperSettings  # noqa: E402
+from gripdem.plots.common import new_figure, save_figure  # noqa: E402
 
 
 def describe(hp: dict) -> str:

@@ -1,8 +1,8 @@
 """Skip what a scene doesn't need: the periodic scene against the Lees-Edwards scene, and the
 cost LE-only work would add to the periodic scene if it were not skipped.
 
-    python experiments/benchmarks/scene_cost.py [--frames 3] [--windows 5] [--repeats 3]
-    python experiments/benchmarks/scene_cost.py --quick        # tiny scene, fewer repetitions
+    python experiments/benchmarks/model_cost/scene_cost.py [--frames 3] [--windows 5] [--repeats 3]
+    python experiments/benchmarks/model_cost/scene_cost.py --quick   # tiny scene, fewer repetitions
 
 Three stages, each timed side by side in one process (the variants interleaved, best of
 ``--repeats``, so a load change on a shared machine hits them alike):
@@ -35,21 +35,23 @@ from pathlib import Path
 import h5py
 import numpy as np
 import torch
-from benchlib import fmt, load_yaml, machine_line, markdown_table, scene_dataset, set_threads
 
-from gripdem.boundary import Boundary, LeesEdwards
-from gripdem.data.batch import collate_windows
-from gripdem.data.dataset import FrameReader, WindowDataset
-from gripdem.data.dataset_io import read_meta
-from gripdem.data.encodings import x_face_crossings
-from gripdem.data.frames import FrameStore
-from gripdem.data.graph import build_graph
-from gripdem.data.windows import Segment, WindowIndex
-from gripdem.dem.config import GeneratorConfig
-from gripdem.dem.engine import Simulation
-from gripdem.inference.checkpoint import data_scene
-from gripdem.models.baselines import predict_baseline
-from gripdem.models.module import TrajectoryModule
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import fmt, load_yaml, machine_line, markdown_table, scene_dataset, set_threads  # noqa: E402
+
+from gripdem.boundary import Boundary, LeesEdwards  # noqa: E402
+from gripdem.data.batch import collate_windows  # noqa: E402
+from gripdem.data.dataset import FrameReader, WindowDataset  # noqa: E402
+from gripdem.data.dataset_io import read_meta  # noqa: E402
+from gripdem.data.encodings import x_face_crossings  # noqa: E402
+from gripdem.data.frames import FrameStore  # noqa: E402
+from gripdem.data.graph import build_graph  # noqa: E402
+from gripdem.data.windows import Segment, WindowIndex  # noqa: E402
+from gripdem.dem.config import GeneratorConfig  # noqa: E402
+from gripdem.dem.engine import Simulation  # noqa: E402
+from gripdem.inference.checkpoint import data_scene  # noqa: E402
+from gripdem.models.baselines import predict_baseline  # noqa: E402
+from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 HISTORY, HORIZON = 10, 10
 

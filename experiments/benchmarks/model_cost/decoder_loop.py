@@ -1,7 +1,8 @@
 """The paper's seq2seq GRU decoder: the cell-by-cell loop against the batched loop, side by side.
 
-    python experiments/benchmarks/decoder_loop.py [--threads 1] [--repeats 3] [--json out.json]
-    python experiments/benchmarks/decoder_loop.py --quick   # 200 particles, one repeat
+    python experiments/benchmarks/model_cost/decoder_loop.py \
+        [--threads 1] [--repeats 3] [--json out.json]
+    python experiments/benchmarks/model_cost/decoder_loop.py --quick   # 200 particles, one repeat
 
 :class:`gripdem.nn.seq2seq.TrajectoryDecoder` with the same weights, run two ways in one
 process: ``reference_forward`` (each head's own loop, one ``nn.GRU`` call per step, as before)
@@ -25,9 +26,11 @@ import time
 from pathlib import Path
 
 import torch
-from benchlib import fmt, machine_line, markdown_table, set_threads
 
-from gripdem.nn.seq2seq import TrajectoryDecoder
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import fmt, machine_line, markdown_table, set_threads  # noqa: E402
+
+from gripdem.nn.seq2seq import TrajectoryDecoder  # noqa: E402
 
 HISTORY, FEATURES, CHANNELS = 10, 32, 6
 #: (split, horizon, hidden, particles): hidden 350 at 100 steps costs ~2.6 TFLOP per pass at

@@ -1,8 +1,8 @@
 """Run time against error: trained models vs the DEM solver vs the baselines, per scene and split.
 
-    python experiments/benchmarks/time_vs_error.py RUN_OR_SWEEP_DIR... [--dem-frames N]
+    python experiments/benchmarks/end_to_end/time_vs_error.py RUN_OR_SWEEP_DIR... [--dem-frames N]
         [--windows N] [--threads 1] [--out-dir experiments/results]
-    python experiments/benchmarks/time_vs_error.py --quick          # trains two smoke models first
+    python experiments/benchmarks/end_to_end/time_vs_error.py --quick   # two smoke models first
 
 Every ``RUN_OR_SWEEP_DIR`` is a ``python -m gripdem.run`` output directory (``metrics.json``,
 ``checkpoints/best.ckpt``, ``.hydra/config.yaml``) or a folder holding such directories (a
@@ -43,10 +43,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
 from benchlib import machine_line, set_threads, train_run  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
-from time_vs_error_report import Row, break_even, plot, replot, table
-from time_vs_error_timing import (
+from time_vs_error_report import Row, break_even, plot, replot, table  # noqa: E402
+from time_vs_error_timing import (  # noqa: E402
     Run,
     data_seconds,
     dem_seconds_per_frame,
@@ -57,8 +58,8 @@ from time_vs_error_timing import (
     time_model,
 )
 
-from gripdem.inference.checkpoint import load_checkpoint_model
-from gripdem.models.autoregressive import fit_on_training_frames
+from gripdem.inference.checkpoint import load_checkpoint_model  # noqa: E402
+from gripdem.models.autoregressive import fit_on_training_frames  # noqa: E402
 
 BASELINE_NAMES = ("stay", "constant_velocity", "mean_flow", "linear_ar")
 

@@ -1,7 +1,7 @@
 """The mission's command, timed end to end and per job: ``python -m gripdem.run -m
 split=190-10,100-100 model=vct`` as a user runs it.
 
-    python experiments/benchmarks/mission_command.py [--variant default sequential]
+    python experiments/benchmarks/end_to_end/mission_command.py [--variant default sequential]
         [--repo DIR] [--extra trainer.max_steps=100] [--fresh-data] [--out experiments/results]
 
 Each variant runs the command once in a subprocess (in ``--repo``, default this checkout,
@@ -34,9 +34,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchlib import machine_line, markdown_table
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import machine_line, markdown_table  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 COMMAND = ["-m", "split=190-10,100-100", "model=vct"]
 #: default: the checkout's own launcher (this one's: jobs side by side; older ones: one after
 #: another); sequential: one job at a time with every thread (the parallel launcher's n_jobs=1)

@@ -4,9 +4,9 @@ The sparse encoder multiplies node features by G_fixed + G_train on the edge lis
 O(edges x channels x time)); the reference scripts multiply by dense n x n matrices
 (O(n^2 x channels x time)). Both run side by side in one process on the same configuration.
 
-    python experiments/benchmarks/encoder_forms.py          # paper preset, n = 2000, CPU
-    python experiments/benchmarks/encoder_forms.py --particles 500 --history 20 --hidden 64 \
-        --channels 32
+    python experiments/benchmarks/model_cost/encoder_forms.py          # paper preset, n = 2000, CPU
+    python experiments/benchmarks/model_cost/encoder_forms.py --particles 500 --history 20 \
+        --hidden 64 --channels 32
 
 Prints a table: encoder forward+backward (sparse vs dense, ratio), and one full training step
 (encoder + 2 seq2seq GRU heads + loss + backward) with each graph operation. Memory is

@@ -1,8 +1,8 @@
 """Fault injection (issue 24): does a command killed at any moment leave nothing behind?
 
-    python experiments/benchmarks/kill_commands.py [--kills 20] [--seed 0] [--strict]
+    python experiments/benchmarks/robustness/kill_commands.py [--kills 20] [--seed 0] [--strict]
         [--commands simulate run multirun predict handback convert] [--work DIR] [--keep]
-    python experiments/benchmarks/kill_commands.py --quick     # 3 kills of each command
+    python experiments/benchmarks/robustness/kill_commands.py --quick     # 3 kills of each command
 
 Each command runs on tiny data (the built-in ``preset=tiny``; ``experiment=smoke`` for
 ``run``), in its own process group, with its own empty ``GRIPDEM_DATA``, output folder and
@@ -45,8 +45,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from benchlib import machine_line, markdown_table
-from kill_checks import (
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import machine_line, markdown_table  # noqa: E402
+from kill_checks import (  # noqa: E402
     EXIT_WAIT,
     MARKER,
     RESUME_TOLERANCE,

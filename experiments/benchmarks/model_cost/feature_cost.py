@@ -1,6 +1,7 @@
 """Time one window's features and graph: gripdem's pipeline vs a straightforward O(n²) one.
 
-    python experiments/benchmarks/feature_cost.py [--particles 2000] [--frames 200] [--repeats 5]
+    python experiments/benchmarks/model_cost/feature_cost.py \
+        [--particles 2000] [--frames 200] [--repeats 5]
 
 A sheared (Lees-Edwards) trajectory at the paper's scale (2000 particles of d = 2.5e-6 m in a
 3.2e-5 m box, φ ≈ 0.5, frames every 5e-6 s at shear rate 1000 1/s, absolute times from 1.1 ms)

@@ -1,9 +1,10 @@
 """Scaling: inference and one training step against particle count, history length and threads.
 
-    python experiments/benchmarks/scaling.py [--scene pbc] [--ops sparse dense contact]
+    python experiments/benchmarks/model_cost/scaling.py [--scene pbc] [--ops sparse dense contact]
         [--sizes 2000 4000 8000 16000 32000 64000] [--histories 10 50 190]
         [--threads 1 2] [--memory-budget-gb 8] [--max-seconds 120] [--json out.json]
-    python experiments/benchmarks/scaling.py --quick     # tiny scene: 400 and 1600 particles
+    python experiments/benchmarks/model_cost/scaling.py --quick
+        # tiny scene: 400 and 1600 particles
 
 Three forms of the model, each the real :class:`~gripdem.models.module.TrajectoryModule` at
 the default preset's widths (untrained: the same operations and time as trained):
@@ -43,7 +44,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import torch
-from benchlib import (
+
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import (  # noqa: E402
     GIB,
     PeakMemory,
     fmt,
@@ -55,13 +58,13 @@ from benchlib import (
     tile_frames,
 )
 
-from gripdem.data.batch import collate_windows
-from gripdem.data.dataset import WindowDataset
-from gripdem.data.dataset_io import read_meta, write_dataset
-from gripdem.data.schema import TrajectoryData
-from gripdem.data.windows import Segment, WindowIndex
-from gripdem.inference.checkpoint import data_scene
-from gripdem.models.module import TrajectoryModule
+from gripdem.data.batch import collate_windows  # noqa: E402
+from gripdem.data.dataset import WindowDataset  # noqa: E402
+from gripdem.data.dataset_io import read_meta, write_dataset  # noqa: E402
+from gripdem.data.schema import TrajectoryData  # noqa: E402
+from gripdem.data.windows import Segment, WindowIndex  # noqa: E402
+from gripdem.inference.checkpoint import data_scene  # noqa: E402
+from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 OPS = {
     "sparse": ["model=grip"],

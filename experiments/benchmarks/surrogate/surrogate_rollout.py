@@ -1,11 +1,14 @@
 """Can the model replace the DEM? A long out-of-sample rollout against the DEM's own simulation.
 
-    python experiments/benchmarks/surrogate_rollout.py --checkpoint pbc=RUN/checkpoints/best.ckpt \
+    python experiments/benchmarks/surrogate/surrogate_rollout.py \
+        --checkpoint pbc=RUN/checkpoints/best.ckpt \
         lebc=RUN/checkpoints/best.ckpt [--frames 2000] [--block 100] [--threads 1]
         [--link L] [--no-correction] [--out-dir experiments/results] [--name surrogate_rollout]
-    python experiments/benchmarks/surrogate_rollout.py --checkpoint pbc=ENS.safetensors \
-        --members 8 --seed 0 --reference pbc=pretrained:pbc   # an ensemble beside the point model
-    python experiments/benchmarks/surrogate_rollout.py --quick   # smoke models on the tiny scene
+    # an ensemble beside the point model
+    python experiments/benchmarks/surrogate/surrogate_rollout.py \
+        --checkpoint pbc=ENS.safetensors --members 8 --seed 0 --reference pbc=pretrained:pbc
+    # smoke models on the tiny scene
+    python experiments/benchmarks/surrogate/surrogate_rollout.py --quick
 
 For each scene, the truth is one new simulation of the built-in DEM (seed 777, which no training
 set uses; cached like every generated dataset), ``K + 1 + frames`` frames long. The model rolls
@@ -43,31 +46,33 @@ from pathlib import Path
 import h5py
 import numpy as np
 import torch
-from benchlib import load_yaml, machine_line, scene_dataset, set_threads, train_run
-from surrogate_handback import dem_seconds_per_frame, generator_config, handback_ratios
-from surrogate_tables import summary_tables
 
-from gripdem.data.dataset_io import read_meta
-from gripdem.dem.output import ensure_scene_dataset
-from gripdem.evaluation.ensemble_scores import (
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import load_yaml, machine_line, scene_dataset, set_threads, train_run  # noqa: E402
+from surrogate_handback import dem_seconds_per_frame, generator_config, handback_ratios  # noqa: E402
+from surrogate_tables import summary_tables  # noqa: E402
+
+from gripdem.data.dataset_io import read_meta  # noqa: E402
+from gripdem.dem.output import ensure_scene_dataset  # noqa: E402
+from gripdem.evaluation.ensemble_scores import (  # noqa: E402
     crps_per_step,
     ensemble_mean_and_spread,
     rank_histogram,
     spread_skill_per_step,
 )
-from gripdem.evaluation.metrics import position_residuals, rmse_per_step
-from gripdem.evaluation.rollout_stats import (
+from gripdem.evaluation.metrics import position_residuals, rmse_per_step  # noqa: E402
+from gripdem.evaluation.rollout_stats import (  # noqa: E402
     DIFFUSION_LAGS,
     block_statistics,
     diffusion_coefficients,
 )
-from gripdem.inference.checkpoint import load_model
-from gripdem.inference.relaxation import DemRelaxation
-from gripdem.inference.rollout import rollout
-from gripdem.inference.stepper import PARTS, StepperSettings
-from gripdem.models.baselines import predict_baseline
-from gripdem.plots.common import save_figure
-from gripdem.plots.rollout import plot_surrogate
+from gripdem.inference.checkpoint import load_model  # noqa: E402
+from gripdem.inference.relaxation import DemRelaxation  # noqa: E402
+from gripdem.inference.rollout import rollout  # noqa: E402
+from gripdem.inference.stepper import PARTS, StepperSettings  # noqa: E402
+from gripdem.models.baselines import predict_baseline  # noqa: E402
+from gripdem.plots.common import save_figure  # noqa: E402
+from gripdem.plots.rollout import plot_surrogate  # noqa: E402
 
 TRUTH_SEED = 777
 

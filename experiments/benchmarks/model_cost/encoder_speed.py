@@ -1,8 +1,9 @@
 """The contact encoder's forward pass: what each lever costs, side by side in one process.
 
-    python experiments/benchmarks/encoder_speed.py [--scene pbc] [--sizes 2000 32000]
+    python experiments/benchmarks/model_cost/encoder_speed.py [--scene pbc] [--sizes 2000 32000]
         [--threads 1] [--repeats 5] [--chunks 2048 8192] [--json out.json]
-    python experiments/benchmarks/encoder_speed.py --quick  # tiny scene, 400 and 1600 particles
+    python experiments/benchmarks/model_cost/encoder_speed.py --quick
+        # tiny scene, 400 and 1600 particles
 
 On the scene's default dataset (tiled along y and z for more particles, as in
 ``surrogate_speed.py``), one observed state's contact graph at each cut-off, and the default
@@ -30,12 +31,14 @@ from pathlib import Path
 import h5py
 import numpy as np
 import torch
-from benchlib import fmt, machine_line, markdown_table, scene_dataset, set_threads, tile_frames
 
-from gripdem.boundary import lattice_continuous_steps, neighbour_pairs
-from gripdem.data.dataset_io import read_meta
-from gripdem.inference.precision import bf16_supported
-from gripdem.nn.contact import ContactEncoder, ContactGraph
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import fmt, machine_line, markdown_table, scene_dataset, set_threads, tile_frames  # noqa: E402
+
+from gripdem.boundary import lattice_continuous_steps, neighbour_pairs  # noqa: E402
+from gripdem.data.dataset_io import read_meta  # noqa: E402
+from gripdem.inference.precision import bf16_supported  # noqa: E402
+from gripdem.nn.contact import ContactEncoder, ContactGraph  # noqa: E402
 
 HISTORY = 10
 

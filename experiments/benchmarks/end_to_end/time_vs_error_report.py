@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -15,6 +16,8 @@ from dataclasses import dataclass, field
 
 import matplotlib
 import matplotlib.pyplot as plt  # noqa: E402
+
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
 from benchlib import fmt, markdown_table  # noqa: E402
 
 matplotlib.use("Agg")

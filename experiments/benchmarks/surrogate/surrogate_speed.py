@@ -1,9 +1,10 @@
 """Surrogate speed-up: time per predicted frame, model vs the built-in DEM and LAMMPS.
 
-    python experiments/benchmarks/surrogate_speed.py [--checkpoint pbc=pretrained:pbc
+    python experiments/benchmarks/surrogate/surrogate_speed.py [--checkpoint pbc=pretrained:pbc
         lebc=...] [--scenes pbc lebc] [--sizes 2000 8000 32000 64000] [--dem-frames 2]
         [--threads 1] [--precision auto] [--no-lammps] [--memory-budget-gb 8] [--json out.json]
-    python experiments/benchmarks/surrogate_speed.py --quick  # tiny scene, 400 and 1600 particles
+    python experiments/benchmarks/surrogate/surrogate_speed.py --quick
+        # tiny scene, 400 and 1600 particles
 
 States of more particles are the scene's default dataset tiled along y and z (2 x 2 copies
 for 8000, 4 x 4 for 32000; the same neighbourhoods, the same frame interval, a valid state
@@ -48,7 +49,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from benchlib import (
+
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
+from benchlib import (  # noqa: E402
     GIB,
     PeakMemory,
     fmt,
@@ -59,19 +62,19 @@ from benchlib import (
     tile_frames,
 )
 
-from gripdem.data.dataset_io import read_meta, write_dataset
-from gripdem.data.schema import TrajectoryData
-from gripdem.dem.config import GeneratorConfig
-from gripdem.dem.engine import Simulation
-from gripdem.inference.checkpoint import data_scene, load_checkpoint_model
-from gripdem.inference.model_file import is_safetensors, read_model_file
-from gripdem.inference.precision import PRECISIONS
-from gripdem.inference.pretrained import resolve
-from gripdem.inference.rollout import rollout
-from gripdem.inference.stepper import PARTS, StepperSettings
-from gripdem.models.module import TrajectoryModule
+from gripdem.data.dataset_io import read_meta, write_dataset  # noqa: E402
+from gripdem.data.schema import TrajectoryData  # noqa: E402
+from gripdem.dem.config import GeneratorConfig  # noqa: E402
+from gripdem.dem.engine import Simulation  # noqa: E402
+from gripdem.inference.checkpoint import data_scene, load_checkpoint_model  # noqa: E402
+from gripdem.inference.model_file import is_safetensors, read_model_file  # noqa: E402
+from gripdem.inference.precision import PRECISIONS  # noqa: E402
+from gripdem.inference.pretrained import resolve  # noqa: E402
+from gripdem.inference.rollout import rollout  # noqa: E402
+from gripdem.inference.stepper import PARTS, StepperSettings  # noqa: E402
+from gripdem.models.module import TrajectoryModule  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "engine"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "engine"))
 
 
 def default_model(scene: str, data_path: Path, quick: bool = False) -> TrajectoryModule:

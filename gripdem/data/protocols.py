@@ -42,7 +42,8 @@ PARTS = ("train", "val", "test")
 
 @dataclass(frozen=True)
 class WindowPlan:
-    """Train/val/test windows of one protocol. ``in_sample`` is True for ``in_sample`` only."""
+    """Train/val/test windows of one protocol. ``in_sample`` is True for the ``in_sample``
+    protocol only."""
 
     protocol: str
     split: Split

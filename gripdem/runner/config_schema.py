@@ -298,7 +298,10 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
             cfg.model.encoding.value,
         )
     if cfg.data.protocol == Protocol.in_sample:
-        log.warning("data.protocol=in_sample is IN-SAMPLE (train = test): report it as such")
+        log.warning(
+            "data.protocol=in_sample tests on the training windows (train = test): report it "
+            "as in-sample"
+        )
     _check_split_fits_the_preset(cfg)
     _check_logger_options(cfg.get("logger") or {})
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history

@@ -119,18 +119,19 @@ def test_a_stopped_or_killed_sweep_leaves_no_job_running(
     tmp_path, gripdem_data_root, tiny_pbc_path, how
 ):
     """SIGTERM to the sweep (forwarded to its jobs), SIGKILL (the kernel's parent-death
-    signal stops them) and a terminal's Ctrl-C (SIGINT to the whole process group). The jobs
-    are given 500 epochs (about 6 min): the signal must find them training however slowly a
-    loaded machine runs them (with 50, a job could end first: measured 20 s after its events
-    file appeared)."""
+    signal stops them) and a terminal's Ctrl-C (SIGINT to the whole process group). The sweep
+    starts with SIGINT at its default, as a terminal starts a command: a test run started in
+    the background of a shell inherits an ignored SIGINT, and so would the sweep and its jobs
+    (they would train on, unstopped)."""
     sweep = tmp_path / "sweep"
     proc = subprocess.Popen(
-        sweep_command(sweep, "model=grip,vct", "trainer.max_epochs=500", "hydra/launcher=parallel"),
+        sweep_command(sweep, "model=grip,vct", "trainer.max_epochs=50", "hydra/launcher=parallel"),
         env=env_of(gripdem_data_root),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,  # its own process group, as a terminal gives a command
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         assert _wait_for(lambda: len(_job_pids(sweep)) == 2, 120), "jobs did not start"

@@ -210,6 +210,7 @@ class LoggerSchema:
     save_dir: str = MISSING
     name: str = ""
     version: str = ""
+    flush_secs: int = 10
 
 
 @dataclass
@@ -311,7 +312,7 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
 
 def _check_logger_options(options) -> None:
     """Refuse a logger option that neither Lightning's TensorBoardLogger nor TensorBoard's
-    SummaryWriter takes (``+logger.flush_secs=5`` is one; a typo is not), in one line. The
+    SummaryWriter takes (``+logger.max_queue=20`` is one; a typo is not), in one line. The
     schema's own keys need no look-up (and no import of Lightning before a sweep starts)."""
     extra = set(options) - set(LoggerSchema.__dataclass_fields__)
     if not extra:

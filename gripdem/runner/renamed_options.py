@@ -10,6 +10,7 @@ from typing import Any
 
 from omegaconf import DictConfig, open_dict
 
+from gripdem.data.protocols import RENAMED_PROTOCOLS
 from gripdem.runner.run_names import hydra_choices
 
 log = logging.getLogger("gripdem.runner.config_schema")
@@ -57,9 +58,10 @@ def apply_deprecated_names(cfg: DictConfig) -> list[str]:
         if _value(cfg.model.encoder.get("name")) == "interaction":
             found.append("model.encoder.name=interaction")
             cfg.model.encoder.name = "contact"
-        if _value(cfg.data.get("protocol")) == "paper":
-            found.append("data.protocol=paper")
-            cfg.data.protocol = "in_sample"
+        protocol = _value(cfg.data.get("protocol"))
+        if protocol in RENAMED_PROTOCOLS:
+            found.append(f"data.protocol={protocol}")
+            cfg.data.protocol = RENAMED_PROTOCOLS[protocol]
         if cfg.data.get("paper_windows") is not None:
             found.append("data.paper_windows")
             cfg.data.in_sample_windows = int(cfg.data.paper_windows)

@@ -103,7 +103,11 @@ def gripdem_data_root(tmp_path_factory, worker_id) -> Path:
     """Session cache directory for generated datasets. Under pytest-xdist every worker uses
     the same one (in the parent of the workers' temporary folders): the dataset cache's file
     lock lets the first worker generate the tiny scenes while the others wait, so they are
-    generated once per test run, not once per worker."""
+    generated once per test run, not once per worker. ``GRIPDEM_TEST_DATA`` names another
+    test run's folder to share (tests/test_portable_numerics.py hands its own to the run it
+    starts)."""
+    if os.environ.get("GRIPDEM_TEST_DATA"):
+        return Path(os.environ["GRIPDEM_TEST_DATA"])
     if worker_id == "master":
         return tmp_path_factory.mktemp("gripdem-data")
     shared = tmp_path_factory.getbasetemp().parent / "gripdem-data"

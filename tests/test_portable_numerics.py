@@ -20,16 +20,30 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def files_with_numerics_tests() -> list[str]:
+    """The test files that mark a test ``numerics`` (the inner run collects only these: the
+    whole suite's collection imports every test module, seconds for nothing)."""
+    here = Path(__file__).resolve()
+    return sorted(
+        str(path.relative_to(ROOT))
+        for path in (ROOT / "tests").rglob("test_*.py")
+        if path != here and "mark.numerics" in path.read_text()
+    )
+
+
 @pytest.mark.first
-def test_numeric_thresholds_hold_with_plain_kernels(tmp_path):
+def test_numeric_thresholds_hold_with_plain_kernels(tmp_path, gripdem_data_root):
     env = {
         **os.environ,
+        "GRIPDEM_TEST_DATA": str(gripdem_data_root),  # the tiny scenes, generated once
         "ATEN_CPU_CAPABILITY": "default",
         "GRIPDEM_TEST_THREADS": "1",
         "OMP_NUM_THREADS": "1",
     }
     cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "numerics"]
-    cmd += ["--basetemp", str(tmp_path / "inner"), "tests"]
+    files = files_with_numerics_tests()
+    assert files, "no test is marked numerics"
+    cmd += ["--basetemp", str(tmp_path / "inner"), *files]
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
     assert " passed" in proc.stdout.splitlines()[-1]

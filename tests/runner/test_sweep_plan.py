@@ -98,13 +98,13 @@ def test_the_estimate_is_of_the_measured_order(overrides, low, high):
 
 
 def test_a_sweep_says_its_jobs_and_their_cost_first(tmp_path):
-    """A sweep that stops at its first job still printed its plan: 4 jobs, an estimate."""
+    """A sweep that stops at its first job still printed its plan: 2 jobs, an estimate."""
     sweep = tmp_path / "sweep"
     proc = gripdem_run(
         [
             "-m",
             "split=190-10,100-100",
-            "model=grip,vct",
+            "model=vct",
             "data.path=/nonexistent/data.h5",
             f"hydra.sweep.dir={sweep}",
         ],
@@ -112,11 +112,11 @@ def test_a_sweep_says_its_jobs_and_their_cost_first(tmp_path):
         tmp_path / "data",
     )
     plan = [line for line in proc.stdout.splitlines() if line.startswith("sweep:")]
-    assert plan and plan[0].startswith("sweep: 4 jobs, about "), proc.stdout[-2000:]
+    assert plan and plan[0].startswith("sweep: 2 jobs, about "), proc.stdout[-2000:]
     assert "on a 2-core CPU like the reference machine" in plan[0]
     assert "dataset" not in plan[0]  # data.path given: nothing to generate
     # every job failed on its data: each is named with its error, and the command says so
     assert proc.returncode == 1
-    assert "4 job(s) of the sweep failed" in proc.stderr
+    assert "2 job(s) of the sweep failed" in proc.stderr
     summary = (sweep / "summary.md").read_text()
-    assert summary.count("failed: ") == 4 and "/nonexistent/data.h5" in summary
+    assert summary.count("failed: ") == 2 and "/nonexistent/data.h5" in summary

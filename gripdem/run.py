@@ -24,7 +24,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from gripdem.config_files import config_dir
-from gripdem.runner.config_schema import register
+from gripdem.runner.config_schema import given_data_path, register
 from gripdem.runner.console import run_hydra_command, single_run_errors
 
 CONFIG_DIR = str(config_dir())  # gripdem/conf: the source tree's conf/, or a wheel's copy
@@ -35,12 +35,13 @@ _OUT_DIRS: list[Path] = []
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="config")
 def main(cfg: DictConfig) -> float:
-    from gripdem.runner.experiment import run_experiment
-
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     _OUT_DIRS.append(out_dir)
     report = None
     with single_run_errors(out_dir):
+        given_data_path(cfg)  # a wrong data.path fails before Lightning's import (seconds)
+        from gripdem.runner.experiment import run_experiment
+
         report = run_experiment(cfg, out_dir)
     if not report:  # a non-zero DDP rank, or a failed job of a multirun (its error.txt)
         return math.nan

@@ -15,10 +15,11 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from enum import Enum
+from pathlib import Path
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING, DictConfig
+from omegaconf import MISSING, DictConfig, OmegaConf
 
 from gripdem.runner.renamed_options import apply_deprecated_names
 from gripdem.runner.run_names import hydra_choices
@@ -240,6 +241,25 @@ def register() -> None:
 
     ConfigStore.instance().store(name="config_schema", node=ConfigSchema)
     register_resolver()
+
+
+def plain(node: Any) -> Any:
+    """A config node as plain Python values (enums as their names)."""
+    if isinstance(node, DictConfig):
+        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
+    return node
+
+
+def given_data_path(cfg: DictConfig) -> Path | None:
+    """``data.path`` as a path, refused naming the option when no such file exists; None for
+    the built-in scene. Light (no torch): ``python -m gripdem.run`` checks it before importing
+    Lightning, so a wrong path fails in a second, not after the seconds of that import."""
+    if cfg.data.path is None:
+        return None
+    path = Path(cfg.data.path).expanduser()
+    if not path.exists():
+        raise FileNotFoundError(f"data.path={cfg.data.path}: no such file")
+    return path
 
 
 def check_combination(cfg: DictConfig, notes: bool = True) -> None:

@@ -43,7 +43,7 @@ from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
 from gripdem.runner.atomic_files import AtomicCheckpointIO
 from gripdem.runner.chained_evaluation import evaluate_chained
-from gripdem.runner.config_schema import check_combination
+from gripdem.runner.config_schema import check_combination, given_data_path, plain
 from gripdem.runner.console import lightning_info_muted, quiet_console
 from gripdem.runner.finetune import (
     apply_finetune_defaults,
@@ -52,7 +52,7 @@ from gripdem.runner.finetune import (
     load_source,
     validate_start,
 )
-from gripdem.runner.outputs import physics_metrics, plain, to_predictions, write_outputs
+from gripdem.runner.outputs import physics_metrics, to_predictions, write_outputs
 from gripdem.runner.progress import StepBudgetBar
 from gripdem.runner.resume import ResumeCheckpoint, resumed_seconds
 from gripdem.runner.tensorboard_log import (
@@ -69,10 +69,8 @@ log = logging.getLogger(__name__)
 
 def resolve_data_path(cfg: DictConfig) -> Path:
     """``data.path`` if given, else the built-in scene dataset (generated once, cached)."""
-    if cfg.data.path is not None:
-        path = Path(cfg.data.path).expanduser()
-        if not path.exists():
-            raise FileNotFoundError(f"data.path={cfg.data.path}: no such file")
+    path = given_data_path(cfg)
+    if path is not None:
         return path
     backend = cfg.get("generator_backend", "numba")
     return ensure_scene_dataset(

@@ -6,21 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
-
 from gripdem.data.datamodule import TrajectoryDataModule
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.models.baselines import BASELINES
+from gripdem.runner.config_schema import plain
 
 #: the comparison set that holds an ensemble's first member
 ENSEMBLE_MEMBER = "member_0"
-
-
-def plain(node: Any) -> Any:
-    """A config node as plain Python values (enums as their names)."""
-    if isinstance(node, DictConfig):
-        return OmegaConf.to_container(node, resolve=True, enum_to_str=True)
-    return node
 
 
 def to_predictions(results: dict[str, Any], dm: TrajectoryDataModule, info: dict) -> Predictions:

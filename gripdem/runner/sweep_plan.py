@@ -163,7 +163,7 @@ def _missing_dataset(job: DictConfig) -> dict[str, float]:
     in the cache yet (empty when it is)."""
     from gripdem.dem.config import GeneratorConfig
     from gripdem.dem.output import dataset_path
-    from gripdem.runner.outputs import plain
+    from gripdem.runner.config_schema import plain
 
     config = GeneratorConfig.from_mappings(
         plain(job.scene),

@@ -64,7 +64,7 @@ def test_a_bad_job_of_a_sweep_is_named_before_any_job_runs(tmp_path):
 def test_decoder_modes_differ_only_in_the_mode():
     """model=grip,pct,vct is a fair sweep: same encoder, decoder, budget and data; the default
     model (contact) is grip under its own name."""
-    from gripdem.runner.outputs import plain
+    from gripdem.runner.config_schema import plain
 
     models = {m: plain(compose_run([f"model={m}"]).model) for m in ("grip", "pct", "vct")}
     default = plain(compose_run([]).model)

@@ -190,8 +190,23 @@ def run_in_events(out: Path):
     return runs["."]
 
 
-@pytest.mark.parametrize("scene", ["pbc", "lebc"])
-@pytest.mark.parametrize("model", ["contact", "grip", "pct", "vct", "vct_paper"])
+def _model_scene_pairs():
+    """Every model end to end in one scene at least, the default model in both, each scene
+    under every decoder family; the other pairs run in the slow tier (each decoder mode's
+    decoding in both scenes is guarded in the default tier by tests/models/test_module.py's
+    shapes test, on the same tiny scenes)."""
+    default_tier = {
+        ("contact", "pbc"), ("contact", "lebc"), ("grip", "pbc"), ("pct", "lebc"),
+        ("vct", "lebc"), ("vct_paper", "pbc"),
+    }  # fmt: skip
+    return [
+        pytest.param(scene, model, marks=() if (model, scene) in default_tier else pytest.mark.slow)
+        for model in ("contact", "grip", "pct", "vct", "vct_paper")
+        for scene in ("pbc", "lebc")
+    ]
+
+
+@pytest.mark.parametrize(("scene", "model"), _model_scene_pairs())
 def test_smoke_run_end_to_end(tmp_path, monkeypatch, gripdem_data_root, request, scene, model):
     request.getfixturevalue(f"tiny_{scene}_path")  # generated once per session
     cfg, out, report = run_smoke(

@@ -115,3 +115,17 @@ def test_model_front_quick(run_script, tmp_path):
     assert len(rows) == 2 and all(r["weights"] > 0 for r in rows)
     assert all(set(r["timing"]) == {"1t/link5", "1t/link1"} for r in rows)
     assert (tmp_path / "model_front.png").stat().st_size > 0
+
+
+def test_model_ab_speed_quick(run_script, tmp_path):
+    """Two model files side by side: a row each, every part timed."""
+    out = run_script(
+        "benchmarks/surrogate/model_ab_speed",
+        *("--model", "a=pretrained:pbc", "--model", "b=pretrained:pbc"),
+        *("--out", str(tmp_path / "ab")),
+    )
+    report = json.loads((tmp_path / "ab.json").read_text())
+    assert set(report["walls_s"]) == {"a", "b"} and "| a | 10 | 10 |" in out
+    for name, walls in report["walls_s"].items():
+        assert len(walls) == 2 and min(walls) > 0
+        assert 0 < sum(report["parts_s"][name].values()) <= min(walls) * 1.001

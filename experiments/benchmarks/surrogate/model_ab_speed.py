@@ -3,7 +3,7 @@
     python experiments/benchmarks/surrogate/model_ab_speed.py \
         --model shipped=pretrained:pbc --model h20=outputs/.../best.safetensors \
         [--scene pbc] [--frames 60] [--repeats 8] [--threads 1] [--precision auto]
-        [--out experiments/results/NAME]
+        [--out experiments/results/NAME] [--quick]
 
 The models roll out from the same observed frames of the scene's default dataset (its last
 simulation, the test simulation of the default protocol) through
@@ -12,6 +12,8 @@ in turn, ``--repeats`` times: on a shared machine the alternation spreads the ot
 load over every model, so the ratios hold where the absolute times drift. Printed per model:
 its horizon and history, the fastest and the median ms per frame, and the fastest run's parts.
 The accuracy of each model is in its own run's metrics (this script times, it does not score).
+Each model runs with the scene (box) of the data, as ``surrogate_speed.py`` moves it.
+``--quick``: the tiny scene, 20 frames, 2 repeats (a check that it runs).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
 from benchlib import machine_line, markdown_table, scene_dataset, set_threads, write_report  # noqa: E402
+from surrogate_speed import model_in_box  # noqa: E402
 
 from gripdem.data.dataset_io import read_meta  # noqa: E402
 from gripdem.inference.checkpoint import load_checkpoint_model  # noqa: E402
@@ -54,17 +57,20 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--precision", default="auto", choices=PRECISIONS)
     ap.add_argument("--out", type=Path, default=None, help="write OUT.md and OUT.json")
+    ap.add_argument("--quick", action="store_true", help="tiny scene, 20 frames, 2 repeats")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.frames, args.repeats = 20, 2
     if any("=" not in m for m in args.model):
         ap.error("--model: NAME=PATH (e.g. shipped=pretrained:pbc)")
     set_threads(args.threads)
-    data_path = scene_dataset(args.scene, "default")
+    data_path = scene_dataset(args.scene, "tiny" if args.quick else "default")
     meta = read_meta(data_path)
     settings = StepperSettings(precision=args.precision)
     models = {}
     for item in args.model:
         name, source = item.split("=", 1)
-        model = load_checkpoint_model(source).eval()
+        model = model_in_box(load_checkpoint_model(source), meta)
         k = int(model.hparams.history_len)
         models[name] = (model, *observed_frames(data_path, k + 1))
     for model, obs, times in models.values():  # untimed: the first forward initialises lazily

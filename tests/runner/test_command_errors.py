@@ -191,6 +191,30 @@ def test_run_refuses_a_split_longer_than_the_data_in_one_line(tmp_path, frames20
     assert "Error executing job" not in proc.stderr
 
 
+def _imported(importtime_stderr: str) -> set[str]:
+    """Module names a ``PYTHONPROFILEIMPORTTIME=1`` process imported (from its stderr)."""
+    return {
+        line.rsplit("|", 1)[1].strip()
+        for line in importtime_stderr.splitlines()
+        if line.startswith("import time:") and "|" in line
+    }
+
+
+def test_a_missing_data_file_is_refused_before_lightning_is_imported(tmp_path):
+    """The seconds of Lightning's import are not paid to say that data.path is wrong."""
+    proc = _run(
+        "gripdem.run",
+        "data.path=/nonexistent/data.h5",
+        f"hydra.run.dir={tmp_path / 'run'}",
+        env={"PYTHONPROFILEIMPORTTIME": "1"},
+    )
+    assert proc.returncode == 1
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert errors == ["error: data.path=/nonexistent/data.h5: no such file"]
+    imported = _imported(proc.stderr)
+    assert "gripdem.runner.console" in imported and "lightning" not in imported
+
+
 def test_run_refuses_a_config_typo_in_one_line():
     proc = _run("gripdem.run", "data.protocl=sims")
     assert proc.returncode == 1

@@ -15,8 +15,10 @@ from gripdem.run import CONFIG_DIR
 from gripdem.runner.sweep_plan import job_seconds
 
 
-def gripdem_run(args: list[str], cwd: Path, data_root: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "GRIPDEM_DATA": str(data_root)}
+def gripdem_run(
+    args: list[str], cwd: Path, data_root: Path, **extra_env: str
+) -> subprocess.CompletedProcess:
+    env = {**os.environ, "GRIPDEM_DATA": str(data_root), **extra_env}
     env.pop("GRIPDEM_TRACEBACK", None)
     return subprocess.run(
         [sys.executable, "-m", "gripdem.run", *args],
@@ -110,9 +112,18 @@ def test_a_sweep_says_its_jobs_and_their_cost_first(tmp_path):
         ],
         tmp_path,
         tmp_path / "data",
+        PYTHONPROFILEIMPORTTIME="1",
     )
     plan = [line for line in proc.stdout.splitlines() if line.startswith("sweep:")]
     assert plan and plan[0].startswith("sweep: 2 jobs, about "), proc.stdout[-2000:]
+    # the sweep's own process plans, launches and summarises without importing Lightning
+    # (its jobs are processes of their own, their output in their console.log)
+    imported = {
+        line.rsplit("|", 1)[1].strip()
+        for line in proc.stderr.splitlines()
+        if line.startswith("import time:")
+    }
+    assert "gripdem.runner.parallel_launcher" in imported and "lightning" not in imported
     assert "on a 2-core CPU like the reference machine" in plan[0]
     assert "dataset" not in plan[0]  # data.path given: nothing to generate
     # every job failed on its data: each is named with its error, and the command says so

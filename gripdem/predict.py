@@ -146,6 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="contact correction: closest centre distance allowed, in diameters (default 1)",
     )
     p.add_argument(
+        "--correction-tolerance",
+        type=float,
+        metavar="F",
+        help="contact correction: overlaps below this fraction of the contact distance are "
+        "left (default 1e-4, the built-in DEM's own overlaps; larger is faster)",
+    )
+    p.add_argument(
         "--members",
         type=int,
         default=1,
@@ -185,6 +192,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"--start must be a frame index >= 0, got {args.start}")
     if not args.overlap_margin >= 0:
         parser.error(f"--overlap-margin must be >= 0, got {args.overlap_margin}")
+    if args.correction_tolerance is not None and not 0 < args.correction_tolerance < 1:
+        parser.error(
+            f"--correction-tolerance must lie in (0, 1) contact distances, "
+            f"got {args.correction_tolerance}"
+        )
     return args
 
 

@@ -26,6 +26,7 @@ from gripdem.evaluation.ensemble_scores import (
 from gripdem.evaluation.metrics import position_residuals, rmse_per_step
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.inference.checkpoint import check_compatible, load_model
+from gripdem.inference.contacts import CORRECTION_TOLERANCE
 from gripdem.inference.in_sample import training_overlap
 from gripdem.inference.rollout import rollout
 from gripdem.inference.stepper import StepperSettings
@@ -137,6 +138,7 @@ def apply_checkpoint(
         link=args.step,
         contact_correction=not getattr(args, "no_correction", False),
         contact_distance=float(getattr(args, "contact_distance", 1.0)),
+        correction_tolerance=getattr(args, "correction_tolerance", None) or CORRECTION_TOLERANCE,
         precision=str(getattr(args, "precision", "fp32")),
     )
     members = int(getattr(args, "members", 1) or 1)

@@ -25,6 +25,9 @@ from gripdem.boundary import NeighbourList, le_cell
 
 #: candidate pairs: within this factor of the contact distance when chosen
 CANDIDATE_MARGIN = 1.05
+#: overlaps left by the correction, as a fraction of the contact distance (the built-in DEM's
+#: own reach ~1e-5-1e-4 d)
+CORRECTION_TOLERANCE = 1e-4
 
 
 @dataclass
@@ -98,7 +101,7 @@ def push_apart(
     time: float,
     distance: float,
     sweeps: int = 20,
-    tolerance: float = 1e-4,
+    tolerance: float = CORRECTION_TOLERANCE,
 ) -> Correction:
     """Push overlapping pairs of ``nl``'s current frame apart in place (``nl.q`` moves); see the
     module doc. ``distance`` in length units (the diameter for touching spheres). The caller

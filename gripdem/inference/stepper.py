@@ -35,7 +35,7 @@ import torch
 from gripdem.boundary import NeighbourList, minimum_image, wrap_positions
 from gripdem.data.batch import inference_batch
 from gripdem.data.graph import graph_from_pairs
-from gripdem.inference.contacts import Correction, push_apart
+from gripdem.inference.contacts import CORRECTION_TOLERANCE, Correction, push_apart
 from gripdem.inference.precision import resolve_precision, set_encoder_precision
 
 PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction", "relaxation")
@@ -47,7 +47,9 @@ class StepperSettings:
 
     link: frames kept per forward pass (None: the model's horizon). contact_correction: push
     overlapping pairs apart after every frame; contact_distance: the closest centre distance
-    allowed, in diameters; correction_sweeps: at most this many Gauss-Seidel sweeps. skin: of the
+    allowed, in diameters; correction_sweeps: at most this many Gauss-Seidel sweeps;
+    correction_tolerance: overlaps smaller than this fraction of the contact distance are left
+    (the sweeps stop when none is larger; the DEM's own reach ~1e-5-1e-4 d). skin: of the
     neighbour list, in diameters. compile: the encoder through ``torch.compile`` (pays for long
     rollouts: seconds of compilation, then a faster forward; falls back with a warning where no
     compiler works). relaxation: a callable ``(previous (N, 3), frame (N, 3), times (2,)) ->
@@ -62,6 +64,7 @@ class StepperSettings:
     contact_correction: bool = True
     contact_distance: float = 1.0
     correction_sweeps: int = 50
+    correction_tolerance: float = CORRECTION_TOLERANCE
     skin: float = 0.3
     compile: bool = False
     relaxation: object | None = None
@@ -222,10 +225,11 @@ class Stepper:
         """Push overlapping pairs apart; when the pushes made the list stale, rebuild it at the
         corrected frame and correct again (pairs it did not hold may touch now)."""
         distance = self.settings.contact_distance * self.d
-        corr = push_apart(nl, time, distance, self.settings.correction_sweeps)
+        sweeps, tolerance = self.settings.correction_sweeps, self.settings.correction_tolerance
+        corr = push_apart(nl, time, distance, sweeps, tolerance)
         if nl.stale(nl.q, time):
             nl.build(wrap_positions(nl.q, self.box, offset), offset, time)
-            again = push_apart(nl, time, distance, self.settings.correction_sweeps)
+            again = push_apart(nl, time, distance, sweeps, tolerance)
             corr.overlapping_after, corr.worst_after = again.overlapping_after, again.worst_after
         return corr
 

@@ -82,6 +82,40 @@ def test_predict_corrects_contacts_by_default(tmp_path, le_file, le_checkpoint):
     assert np.abs(p.pred_positions - cv).max() > 1e-3 * d  # the correction moved particles
 
 
+def test_a_looser_correction_tolerance_leaves_overlaps_below_it(tmp_path, le_file, le_checkpoint):
+    """``--correction-tolerance``: recorded in the report; no pair closer than the contact
+    distance by more than it; the help states the stepper's default."""
+    from gripdem.inference.contacts import CORRECTION_TOLERANCE
+    from gripdem.predict import build_parser
+
+    stated = re.search(
+        r"left \(default ([0-9.e-]+),", " ".join(build_parser().format_help().split())
+    )
+    assert stated and float(stated.group(1)) == CORRECTION_TOLERANCE
+    out = tmp_path / "pred.h5"
+    args = ("--start", 25, "--frames", 12, "--correction-tolerance", "0.01")
+    assert run(le_checkpoint, le_file, out, *args) == 0
+    report = json.loads((tmp_path / "pred_rollout.json").read_text())
+    assert report["settings"]["correction_tolerance"] == 0.01
+    trajectory = read_dataset(tmp_path / "pred_trajectory.h5")
+    offsets, d = trajectory.offsets(), trajectory.diameter
+    for t in range(6, trajectory.n_frames):
+        _, _, vec = brute_force_pairs(trajectory.positions[0, t], trajectory.box, offsets[0, t], d)
+        assert (np.linalg.norm(vec, axis=1) > d * (1 - 0.0101)).all(), t
+
+
+@pytest.mark.parametrize("value", ["0", "1", "nan"])
+def test_a_correction_tolerance_outside_0_1_is_refused_in_one_line(tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as stop:
+        main(["pretrained:pbc", str(tmp_path / "d.h5"), "--correction-tolerance", value])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.endswith(
+        f"--correction-tolerance must lie in (0, 1) contact distances, got {float(value)}"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_predict_from_the_last_frames_writes_the_rollout_only(
     tmp_path, capsys, le_file, le_checkpoint
 ):

@@ -109,6 +109,48 @@ def test_contact_correction_pushes_overlapping_pairs_apart():
     assert 0 < corr.rms_push < 0.1
 
 
+@pytest.mark.parametrize("tolerance", [1e-4, 1e-3])
+def test_a_looser_correction_tolerance_leaves_only_overlaps_below_it(tolerance):
+    """The same jittered lattice: no pair closer than the contact distance by more than the
+    tolerance, the centre of mass in place, and a looser tolerance never takes more sweeps."""
+    from gripdem.boundary import Box, brute_force_pairs
+
+    rng = np.random.default_rng(3)
+    box = Box(8.4, 7.35, 9.45)
+    grid = np.stack(np.meshgrid(*(np.arange(k) for k in (8, 7, 9)), indexing="ij"), -1)
+    q = (grid.reshape(-1, 3) + 0.5) * 1.05 - 0.5 * box.lengths + rng.normal(0.0, 0.04, (504, 3))
+    sweeps = {}
+    for tol in (tolerance, 1e-6):
+        nl = NeighbourList(box, 1.0, 0.3, image_velocity=0.0)
+        nl.build(q, 0.0, 0.0)
+        corr = push_apart(nl, 0.0, 1.0, sweeps=200, tolerance=tol)
+        assert corr.overlapping_after == 0 and corr.worst_after <= tol
+        _, _, vec = brute_force_pairs(nl.q, box, 0.0, 1.0)
+        assert np.linalg.norm(vec, axis=1).min() >= 1.0 - tol * (1 + 1e-9)
+        np.testing.assert_allclose(nl.q.mean(axis=0), q.mean(axis=0), atol=1e-12)
+        sweeps[tol] = corr.sweeps
+    assert sweeps[tolerance] <= sweeps[1e-6]
+
+
+def test_the_stepper_corrects_to_its_tolerance(tiny_pbc_path):
+    """A perturbed model's frames overlap: the default tolerance (1e-4 contact distances)
+    counts and pushes those pairs, a tolerance of half a diameter counts none of them."""
+    assert StepperSettings().correction_tolerance == 1e-4
+    model, dm = smoke_model(tiny_pbc_path, "scene=pbc")
+    perturb(model, scale=0.05)
+    k = int(model.hparams.history_len)
+    sims = list(dm.plan.test.sims)
+    frames = np.stack([dm.datasets["test"].reader.read(s, 0, k + 1) for s in sims])
+    times = dm._times[sims][:, : k + 1]
+    counted = {}
+    for tolerance in (1e-4, 0.5):
+        stepper = Stepper(model, frames, times, StepperSettings(correction_tolerance=tolerance))
+        stepper.advance(5)
+        assert stepper.settings.to_dict()["correction_tolerance"] == tolerance
+        counted[tolerance] = sum(stepper.report.overlapping_before)
+    assert counted[1e-4] > 0 and counted[0.5] == 0, counted
+
+
 def test_bf16_stepper_runs_a_copy_close_to_fp32(tiny_pbc_path):
     """precision bf16 (native or emulated) predicts within a stated tolerance of fp32 on the
     same state, and leaves the caller's model in fp32; auto follows the CPU's bf16 units."""

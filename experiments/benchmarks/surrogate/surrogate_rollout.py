@@ -67,6 +67,7 @@ from gripdem.evaluation.rollout_stats import (  # noqa: E402
     diffusion_coefficients,
 )
 from gripdem.inference.checkpoint import load_model  # noqa: E402
+from gripdem.inference.contacts import CORRECTION_TOLERANCE  # noqa: E402
 from gripdem.inference.relaxation import DemRelaxation  # noqa: E402
 from gripdem.inference.rollout import rollout  # noqa: E402
 from gripdem.inference.stepper import PARTS, StepperSettings  # noqa: E402
@@ -203,6 +204,7 @@ def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     settings = StepperSettings(
         link=args.link,
         contact_correction=not args.no_correction and relaxation is None,
+        correction_tolerance=args.correction_tolerance,
         relaxation=relaxation,
     )
     started = time.perf_counter()
@@ -289,6 +291,12 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--block", type=int, default=100)
     parser.add_argument("--link", type=int, help="frames kept per forward pass")
     parser.add_argument("--no-correction", action="store_true")
+    parser.add_argument(
+        "--correction-tolerance",
+        type=float,
+        default=CORRECTION_TOLERANCE,
+        help="overlaps the contact correction leaves, in contact distances",
+    )
     parser.add_argument("--handback-steps", type=int, default=100)
     parser.add_argument(
         "--relax-steps",

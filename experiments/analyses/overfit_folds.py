@@ -33,11 +33,9 @@ TOTAL_STEPS = 200
 
 def folds_of_every_mode(steps: list[int]) -> dict[str, dict[str, float]]:
     """In this process: the test's setup, 200 steps per mode, the fold at each of ``steps``."""
-    import torch
-
     sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "models")]
     from hydra import compose, initialize_config_dir
-    from test_module import MODES, datamodule, make_module
+    from test_module import MODES, overfit_losses
 
     from gripdem.config_files import config_dir
     from gripdem.dem.output import ensure_scene_dataset
@@ -45,22 +43,9 @@ def folds_of_every_mode(steps: list[int]) -> dict[str, dict[str, float]]:
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         cfg = compose("simulate", overrides=["scene=lebc", "preset=tiny"])  # the test's scene
     path = ensure_scene_dataset(cfg.scene, cfg.preset, sims=cfg.sims, seed=cfg.seed)
-    options = {"graph_conv": {"channels": 16, "n_blocks": 1}, "contact": {"channels": 16}}
     out = {}
     for mode, encoding, shift, encoder in MODES:  # as the test builds and trains each
-        torch.manual_seed(0)
-        dm = datamodule(path, encoding, graph_cutoff=1.5)
-        config = {"name": encoder, **options[encoder]}
-        model = make_module(dm, mode, encoding, shift, config, hidden=32)
-        batch = next(iter(dm.val_dataloader()))
-        opt = torch.optim.Adam(model.parameters(), lr=1e-2)
-        losses = []
-        for _ in range(TOTAL_STEPS):
-            opt.zero_grad()
-            loss = model._loss(model(batch), batch)
-            loss.backward()
-            opt.step()
-            losses.append(loss.item())
+        losses = overfit_losses(path, mode, encoding, shift, encoder, TOTAL_STEPS)
         name = f"{mode}/{encoding}/{shift}/{encoder}"
         out[name] = {str(n): losses[0] / min(losses[n - 20 : n]) for n in steps}
     return out

@@ -122,6 +122,25 @@ OVERFIT_STEPS = 120
 OVERFIT_FOLD = 2.0
 
 
+def overfit_losses(path, mode, encoding, shift, encoder, steps: int) -> list[float]:
+    """The loss of each of ``steps`` Adam steps (lr 1e-2) on one fixed window of ``path``, a
+    small model of the mode (also run by experiments/analyses/overfit_folds.py)."""
+    torch.manual_seed(0)
+    dm = datamodule(path, encoding, graph_cutoff=1.5)
+    options = {"graph_conv": {"channels": 16, "n_blocks": 1}, "contact": {"channels": 16}}
+    model = make_module(dm, mode, encoding, shift, {"name": encoder, **options[encoder]}, hidden=32)
+    batch = next(iter(dm.val_dataloader()))  # one fixed window, whatever the shuffling
+    opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+    losses = []
+    for _ in range(steps):
+        opt.zero_grad()
+        loss = model._loss(model(batch), batch)
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    return losses
+
+
 @pytest.mark.numerics
 @pytest.mark.parametrize(("mode", "encoding", "shift", "encoder"), MODES)
 def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
@@ -133,19 +152,7 @@ def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
     1|2 threads (experiments/results/overfit_folds.md): the smallest fold measured there is
     at least twice the one asked for here.
     """
-    torch.manual_seed(0)
-    dm = datamodule(tiny_lebc_path, encoding, graph_cutoff=1.5)
-    options = {"graph_conv": {"channels": 16, "n_blocks": 1}, "contact": {"channels": 16}}
-    model = make_module(dm, mode, encoding, shift, {"name": encoder, **options[encoder]}, hidden=32)
-    batch = next(iter(dm.val_dataloader()))  # one fixed window, whatever the shuffling
-    opt = torch.optim.Adam(model.parameters(), lr=1e-2)
-    losses = []
-    for _ in range(OVERFIT_STEPS):
-        opt.zero_grad()
-        loss = model._loss(model(batch), batch)
-        loss.backward()
-        opt.step()
-        losses.append(loss.item())
+    losses = overfit_losses(tiny_lebc_path, mode, encoding, shift, encoder, OVERFIT_STEPS)
     fold_reached = losses[0] / min(losses[-20:])
     assert fold_reached > OVERFIT_FOLD, (losses[0], min(losses[-20:]))
 

@@ -154,6 +154,14 @@ def build_parser() -> argparse.ArgumentParser:
         "frame, but its states are unfit to hand back to a DEM)",
     )
     p.add_argument(
+        "--contact-capture",
+        type=float,
+        metavar="GAP",
+        help="contact correction of a cohesive scene: pairs closer than GAP contact distances "
+        "are pulled into contact, as the DEM's cohesion snaps them shut (0: off; default: the "
+        "model's own, recorded in its file)",
+    )
+    p.add_argument(
         "--members",
         type=int,
         default=1,
@@ -161,6 +169,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="an ensemble model: roll out M members per simulation (each a valid trajectory, "
         "rows s*M+m of the trajectory file; PRED_ensemble.h5 holds their mean and spread, "
         "predictions.h5 their mean); a deterministic model has one",
+    )
+    p.add_argument(
+        "--noise-scale",
+        type=float,
+        metavar="F",
+        help="an ensemble model: its members' latent noise times F (default: the model's own "
+        "inflation, recorded in its file; 1: as trained)",
     )
     p.add_argument(
         "--seed",
@@ -198,6 +213,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
             f"--correction-tolerance must lie in (0, 1) contact distances, "
             f"got {args.correction_tolerance}"
         )
+    if args.noise_scale is not None and not 0 < args.noise_scale < float("inf"):
+        parser.error(f"--noise-scale must be a positive number, got {args.noise_scale}")
+    if args.contact_capture is not None:
+        from gripdem.models.ensemble import MAX_CONTACT_CAPTURE
+
+        if not 0 <= args.contact_capture <= MAX_CONTACT_CAPTURE:
+            parser.error(
+                f"--contact-capture must lie in [0, {MAX_CONTACT_CAPTURE:g}] contact distances, "
+                f"got {args.contact_capture}"
+            )
+        if args.contact_capture and args.no_correction:
+            parser.error(
+                "--contact-capture works inside the contact correction: drop --no-correction"
+            )
     return args
 
 

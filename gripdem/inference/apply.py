@@ -105,6 +105,29 @@ def _ensemble_scores(member_pred, true, times, meta: DatasetMeta, baselines) -> 
     return out
 
 
+def check_cohesive(data_path: Path, meta, capture: float | None) -> float | None:
+    """``--contact-capture`` as given, refused (ValueError naming the option and the file) where
+    the data's provenance does not record a cohesive contact law: capturing pairs into contact
+    stands in for the DEM's cohesion, which a scene without one (or of unknown law: data from
+    another code) does not have."""
+    if not capture:
+        return capture
+    scene = ((meta.provenance or {}).get("parameters") or {}).get("scene") or {}
+    hamaker = scene.get("hamaker")
+    if hamaker is None:
+        raise ValueError(
+            f"--contact-capture {capture:g}: {data_path} does not record its contact law (no "
+            "provenance parameters.scene.hamaker: not made by the built-in DEM), so whether its "
+            "contacts are cohesive is unknown; drop --contact-capture or pass 0"
+        )
+    if not float(hamaker) > 0:
+        raise ValueError(
+            f"--contact-capture {capture:g}: {data_path}'s scene has no cohesion (hamaker = "
+            f"{hamaker}): its contacts open freely; drop --contact-capture or pass 0"
+        )
+    return capture
+
+
 def apply_checkpoint(
     args: argparse.Namespace, out: Path, traj_path: Path, report_path: Path
 ) -> dict[str, Any]:
@@ -130,6 +153,13 @@ def apply_checkpoint(
             f"({meta.n_frames} frames)"
         )
     model = load_model(args.checkpoint, meta)
+    if getattr(args, "noise_scale", None) is not None:
+        if not model.is_ensemble:
+            raise ValueError(
+                f"--noise-scale {args.noise_scale:g}: {args.checkpoint} is a deterministic model "
+                "(no latent noise to scale)"
+            )
+        model.hparams.noise_scale = float(args.noise_scale)
     with h5py.File(data_path, "r") as h5:
         all_times = np.asarray(h5["times"][()], np.float64)[sims]
         radii = np.asarray(h5["radii"][()]) if "radii" in h5 else None
@@ -139,6 +169,7 @@ def apply_checkpoint(
         contact_correction=not getattr(args, "no_correction", False),
         contact_distance=float(getattr(args, "contact_distance", 1.0)),
         correction_tolerance=getattr(args, "correction_tolerance", None) or CORRECTION_TOLERANCE,
+        contact_capture=check_cohesive(data_path, meta, getattr(args, "contact_capture", None)),
         precision=str(getattr(args, "precision", "fp32")),
     )
     members = int(getattr(args, "members", 1) or 1)
@@ -173,6 +204,10 @@ def apply_checkpoint(
         "horizon": f,
         "step": f if args.step is None else int(args.step),
         "settings": settings.to_dict(),
+        # as applied: the model's own capture unless given, the observed resting overlap
+        "contact_capture": run.stepper.capture,
+        "contact_overlap": run.stepper.overlap,
+        "noise_scale": float(model.hparams.get("noise_scale", 1.0)) if model.is_ensemble else None,
         "precision": run.stepper.precision,
         "encoding": hp["encoding"],
         "decoder_mode": hp["decoder_mode"],

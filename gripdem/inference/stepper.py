@@ -35,8 +35,14 @@ import torch
 from gripdem.boundary import NeighbourList, minimum_image, wrap_positions
 from gripdem.data.batch import inference_batch
 from gripdem.data.graph import graph_from_pairs
-from gripdem.inference.contacts import CORRECTION_TOLERANCE, Correction, push_apart
+from gripdem.inference.contacts import (
+    CORRECTION_TOLERANCE,
+    Correction,
+    push_apart,
+    resting_overlap,
+)
 from gripdem.inference.precision import resolve_precision, set_encoder_precision
+from gripdem.models.ensemble import check_contact_capture
 
 PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction", "relaxation")
 
@@ -57,7 +63,11 @@ class StepperSettings:
     :class:`gripdem.inference.relaxation.DemRelaxation`; None: off). precision: of the
     encoder (auto | fp32 | bf16, :mod:`gripdem.inference.precision`; auto: bf16 where the
     device computes it natively); the stepper then runs a copy of the model, the model passed
-    in is left as it was.
+    in is left as it was. contact_capture: pairs closer than this gap (contact distances) are
+    pulled into contact by the correction (the cohesion's snap,
+    :mod:`gripdem.inference.contacts`; 0: off; needs
+    ``contact_correction``; None: the model's own ``contact_capture`` hyperparameter, off without
+    correction).
     """
 
     link: int | None = None
@@ -69,6 +79,26 @@ class StepperSettings:
     compile: bool = False
     relaxation: object | None = None
     precision: str = "fp32"
+    contact_capture: float | None = None
+    contact_overlap: float | None = None
+
+    def __post_init__(self):
+        if self.contact_overlap is not None and not (
+            0.0 <= float(self.contact_overlap) < self.correction_tolerance
+        ):
+            raise ValueError(
+                f"contact_overlap is where corrected pairs end, a fraction of the contact "
+                f"distance in [0, correction_tolerance = {self.correction_tolerance:g}), got "
+                f"{self.contact_overlap}"
+            )
+        if self.contact_capture is None:
+            return
+        check_contact_capture(self.contact_capture, "contact_capture")
+        if self.contact_capture and not self.contact_correction:
+            raise ValueError(
+                "contact_capture works inside the contact correction: it needs "
+                "contact_correction on (no relaxation, no --no-correction)"
+            )
 
     def to_dict(self) -> dict:
         out = dict(self.__dict__)
@@ -84,6 +114,7 @@ class StepReport:
     worst_overlap_before: list[float] = field(default_factory=list)
     overlapping_after: list[int] = field(default_factory=list)
     rms_push_over_d: list[float] = field(default_factory=list)
+    pulled: list[int] = field(default_factory=list)
 
 
 class Stepper:
@@ -111,6 +142,13 @@ class Stepper:
         self.dt = float(model.hparams.scene["frame_interval"])
         self.cutoff = float(model.hparams.graph_cutoff) * self.d
         self.radius = max(self.cutoff, self.settings.contact_distance * self.d)
+        own = check_contact_capture(
+            model.hparams.get("contact_capture", 0.0), "the model's contact_capture"
+        )
+        given = self.settings.contact_capture
+        self.capture = (
+            (own if given is None else given) if self.settings.contact_correction else 0.0
+        )
         self.set_state(observed, times)
         self.seconds = dict.fromkeys(PARTS, 0.0)
         self.report = StepReport()
@@ -151,6 +189,11 @@ class Stepper:
             nl.build(
                 self.frames[s, -1], float(self.offsets(self.times[s, -1:])[0]), self.times[s, -1]
             )
+        distance = self.settings.contact_distance * self.d
+        tolerance = self.settings.correction_tolerance
+        self.overlap = self.settings.contact_overlap
+        if self.overlap is None:  # the observed frames' resting contacts (first simulation's)
+            self.overlap = resting_overlap(self.lists[0], self.times[0, -1], distance, tolerance)
         self._pending = None
         self.stopped = None
 
@@ -213,7 +256,7 @@ class Stepper:
             self.seconds["neighbour_list"] += time.perf_counter() - started
             if self.settings.contact_correction:
                 started = time.perf_counter()
-                corr = self._correct(nl, float(times[sim]), float(offsets[sim]))
+                corr = self._correct(nl, float(times[sim]), float(offsets[sim]), sim)
                 self._record(corr, sim)
                 kept[sim] = wrap_positions(nl.q, self.box, float(offsets[sim]))
                 self.seconds["correction"] += time.perf_counter() - started
@@ -221,15 +264,17 @@ class Stepper:
         self.times = np.concatenate([self.times[:, 1:], times[:, None]], axis=1)
         return kept
 
-    def _correct(self, nl: NeighbourList, time: float, offset: float) -> Correction:
-        """Push overlapping pairs apart; when the pushes made the list stale, rebuild it at the
-        corrected frame and correct again (pairs it did not hold may touch now)."""
+    def _correct(self, nl: NeighbourList, time: float, offset: float, sim: int) -> Correction:
+        """Push overlapping pairs apart (and pull captured pairs into contact); when the moves
+        made the list stale, rebuild it at the corrected frame and correct again (pairs it did
+        not list may touch now)."""
         distance = self.settings.contact_distance * self.d
         sweeps, tolerance = self.settings.correction_sweeps, self.settings.correction_tolerance
-        corr = push_apart(nl, time, distance, sweeps, tolerance)
+        pulls = (self.capture, self.overlap)
+        corr = push_apart(nl, time, distance, sweeps, tolerance, *pulls)
         if nl.stale(nl.q, time):
             nl.build(wrap_positions(nl.q, self.box, offset), offset, time)
-            again = push_apart(nl, time, distance, sweeps, tolerance)
+            again = push_apart(nl, time, distance, sweeps, tolerance, *pulls)
             corr.overlapping_after, corr.worst_after = again.overlapping_after, again.worst_after
         return corr
 
@@ -238,11 +283,13 @@ class Stepper:
             for name in ("overlapping_before", "worst_overlap_before", "overlapping_after"):
                 getattr(self.report, name).append(0)
             self.report.rms_push_over_d.append(0.0)
+            self.report.pulled.append(0)
         r = self.report
         r.overlapping_before[-1] += corr.overlapping_before
         r.worst_overlap_before[-1] = max(r.worst_overlap_before[-1], corr.worst_before)
         r.overlapping_after[-1] += corr.overlapping_after
         r.rms_push_over_d[-1] += corr.rms_push / self.d / self.n_sims
+        r.pulled[-1] += corr.pulled
 
     def advance(self, count: int) -> np.ndarray:
         """Predict ``count`` more frames; returns them ``(S, count, N, 3)`` as kept, or fewer

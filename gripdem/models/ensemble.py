@@ -14,7 +14,32 @@ from __future__ import annotations
 import torch
 
 LOSSES = ("mse", "crps")
+#: the largest ``contact_capture`` (contact distances): the built-in scenes' cohesion reach
+MAX_CONTACT_CAPTURE = 0.1
 LOSS_WEIGHTINGS = ("horizon", "step")
+
+
+def check_contact_capture(value: float, name: str) -> float:
+    """A ``contact_capture`` gap (contact distances: a pair of a predicted frame closer than it
+    is pulled into contact, :mod:`gripdem.inference.contacts`), checked: [0,
+    ``MAX_CONTACT_CAPTURE``], 0 is off."""
+    if not 0.0 <= float(value) <= MAX_CONTACT_CAPTURE:
+        raise ValueError(
+            f"{name} is a gap in contact distances in [0, {MAX_CONTACT_CAPTURE:g}] (0: off), "
+            f"got {value}"
+        )
+    return float(value)
+
+
+def check_rollout_options(contact_capture: float, noise_scale: float) -> None:
+    """The model's rollout-only hyperparameters: ``model.contact_capture`` and
+    ``model.noise_scale`` (a positive finite factor on the members' latent noise)."""
+    check_contact_capture(contact_capture, "model.contact_capture")
+    if not 0.0 < float(noise_scale) < float("inf"):
+        raise ValueError(
+            f"model.noise_scale scales the members' latent noise: a positive number, got "
+            f"{noise_scale}"
+        )
 
 
 class EnsembleMembers:
@@ -53,11 +78,14 @@ class EnsembleMembers:
 
     def sample_noise(self, batch_size: int, particles: int) -> torch.Tensor:
         """Standard normal latent noise ``(batch, particles, noise_channels)`` from
-        :attr:`noise_generator`."""
+        :attr:`noise_generator`; outside training scaled by ``hparams.noise_scale`` (inflation of
+        an under-dispersed ensemble, chosen on validation data)."""
         gen = self.noise_generator
         device = gen.device if gen is not None else self.change_std.device
         shape = (batch_size, particles, self.encoder.noise_channels)
-        return torch.randn(shape, generator=gen, device=device).to(self.change_std.device)
+        noise = torch.randn(shape, generator=gen, device=device).to(self.change_std.device)
+        scale = 1.0 if self.training else float(self.hparams.get("noise_scale", 1.0))
+        return noise if scale == 1.0 else scale * noise
 
     def forward_members(self, batch, members: int) -> torch.Tensor:
         """``members`` forward passes with independent noise: ``(M, B, N, horizon, C)`` (a

@@ -30,7 +30,7 @@ from gripdem.data.normalizer import Normalizer
 from gripdem.models import decoder_modes as modes
 from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
-from gripdem.models.ensemble import EnsembleMembers
+from gripdem.models.ensemble import EnsembleMembers, check_rollout_options
 from gripdem.models.evaluation import RolloutEvaluation
 from gripdem.models.training import TrainingSteps
 from gripdem.nn.contact import ContactEncoder, ContactGraph
@@ -88,8 +88,7 @@ def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
 
 
 def _uses_position_features(setting: Any, boundary: Boundary) -> bool:
-    """x-position features for the contact encoder: the periodic drive depends on x; the
-    sheared cell is homogeneous (``auto``)."""
+    """x-position features (contact encoder; ``auto``: periodic drive yes, sheared cell no)."""
     setting = str(setting).lower()
     if setting not in POSITION_FEATURES:
         raise ValueError(
@@ -136,6 +135,9 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             (``encoder.noise_channels > 0``: one forward pass draws one member).
         loss_weighting, pair_crps: how the CRPS weighs the horizon steps and the neighbour
             pairs' relative motion (:func:`gripdem.models.decoder_modes.exact_crps_loss`).
+        contact_capture, noise_scale: rollouts only: pairs closer than this gap (contact
+            distances) are pulled into contact (0: off; :mod:`gripdem.inference.contacts`); the
+            members' latent noise is scaled by this (inflation; 1: as trained).
     """
 
     def __init__(
@@ -171,6 +173,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         eval_members: int = 8,
         loss_weighting: str = "horizon",
         pair_crps: float = 0.0,
+        contact_capture: float = 0.0,
+        noise_scale: float = 1.0,
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)
@@ -179,6 +183,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             raise ValueError(
                 f"model.lr_schedule must be one of {LR_SCHEDULES}, got {lr_schedule!r}"
             )
+        check_rollout_options(contact_capture, noise_scale)
         self.boundary = boundary_from_hparams(scene)
         self.diameter = float(scene["diameter"])
         self.strain = affine_flow_strain(self.boundary, float(scene.get("frame_interval", 0.0)))
@@ -195,14 +200,13 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         self.profile = profile or ("linear" if self.boundary.is_lees_edwards else "cosine")
         self.linear_ar = None if linear_ar is None else LinearAR.from_dict(linear_ar)
         self.baselines = tuple(b for b in BASELINES if b != "linear_ar" or self.linear_ar)
-        self.ar_gate = None
+        self.ar_gate = None  # starts at zero (untrained: CV), one per horizon step and axis
         if ar_prior:
             if not self.exact or self.linear_ar is None:
                 raise ValueError(
                     "model.ar_prior=true needs the exact frame (model.encoding=unwrapped) and the "
                     "fitted linear AR baseline"
                 )
-            # zero: an untrained model is CV; one gate per horizon step and axis
             self.ar_gate = torch.nn.Parameter(torch.zeros(horizon, 3))
         self.position_features = False  # x-position node features (contact encoder)
         self.encoder_name, self.encoder = self._build_encoder(dict(encoder or {}), n_particles)
@@ -303,8 +307,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         return relative, static
 
     def _encode(self, batch, noise: torch.Tensor | None = None) -> torch.Tensor:
-        """Per-particle features ``(B, N, T, C)`` for the seq2seq block (an ensemble model
-        draws its noise when none is given)."""
+        """Per-particle features ``(B, N, T, C)`` of the seq2seq block (ensembles draw noise)."""
         if self.encoder_name == "contact":
             history, static = self._contact_inputs(batch)
             if noise is None and self.is_ensemble:

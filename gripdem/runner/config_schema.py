@@ -150,6 +150,8 @@ class ModelSchema:
     eval_members: int = 8
     loss_weighting: str = "horizon"
     pair_crps: float = 0.0
+    contact_capture: float = 0.0
+    noise_scale: float = 1.0
     monitor: str = "val/rmse"
 
 

@@ -135,6 +135,8 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         eval_members=model_cfg["eval_members"],
         loss_weighting=model_cfg["loss_weighting"],
         pair_crps=model_cfg["pair_crps"],
+        contact_capture=model_cfg["contact_capture"],
+        noise_scale=model_cfg["noise_scale"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),

@@ -155,6 +155,25 @@ def noise_floor(scene: str, preset: str, frames: int, block: int) -> dict:
     return block_statistics(b, a, times, meta.boundary, meta.diameter, block=block)
 
 
+def stepper_settings(args, relaxation=None) -> StepperSettings:
+    """The stepper settings the options ask for (None: the stepper's and the model's own)."""
+    overlap = args.contact_overlap
+    return StepperSettings(
+        link=args.link,
+        contact_correction=not args.no_correction and relaxation is None,
+        correction_tolerance=args.correction_tolerance,
+        relaxation=relaxation,
+        contact_capture=args.contact_capture,
+        contact_overlap=None if overlap == "observed" else float(overlap),
+    )
+
+
+def rollout_options(model, args) -> None:
+    """``--noise-scale`` in place of the model's own inflation (an ensemble's ablation)."""
+    if args.noise_scale is not None:
+        model.hparams.noise_scale = float(args.noise_scale)
+
+
 def member_cost(checkpoint, reference, scene, args, preset, frames: int = 100, repeats: int = 3):
     """ms per member and frame over ``frames`` frames from the truth's start, side by side and
     interleaved (fastest of ``repeats``): the reference model (one member), the ensemble with
@@ -168,6 +187,7 @@ def member_cost(checkpoint, reference, scene, args, preset, frames: int = 100, r
     path = truth_dataset(scene, preset, k + 1 + args.frames)
     truth, times = read_sim(path, 0, k + 1)
     meta = read_meta(path)
+    rollout_options(models["ensemble"], args)
     cases = {
         "reference, 1 member": (models["reference"], 1),
         "ensemble, 1 member": (models["ensemble"], 1),
@@ -183,6 +203,7 @@ def member_cost(checkpoint, reference, scene, args, preset, frames: int = 100, r
                 truth[None],
                 times[None],
                 frames,
+                stepper_settings(args) if model is models["ensemble"] else None,
                 check_overlap=False,
                 members=members,
                 seed=args.seed,
@@ -201,12 +222,8 @@ def evaluate_scene(scene, checkpoint, args, preset, members: int = 1) -> dict:
     truth, times = read_sim(path, 0)
     config = generator_config(path)
     relaxation = DemRelaxation(config, args.relax_steps) if args.relax_steps else None
-    settings = StepperSettings(
-        link=args.link,
-        contact_correction=not args.no_correction and relaxation is None,
-        correction_tolerance=args.correction_tolerance,
-        relaxation=relaxation,
-    )
+    settings = stepper_settings(args, relaxation)
+    rollout_options(model, args)
     started = time.perf_counter()
     run = rollout(
         model,
@@ -296,6 +313,26 @@ def main(argv: list[str] | None = None) -> dict:
         type=float,
         default=CORRECTION_TOLERANCE,
         help="overlaps the contact correction leaves, in contact distances",
+    )
+    parser.add_argument(
+        "--contact-capture",
+        type=float,
+        metavar="GAP",
+        help="pairs closer than GAP contact distances are pulled into contact (default: the "
+        "model's own contact_capture)",
+    )
+    parser.add_argument(
+        "--contact-overlap",
+        default="observed",
+        metavar="F",
+        help="where corrected pairs end, a fraction of the contact distance inside it "
+        "(default observed: the observed frame's resting contacts; 0: exactly touching)",
+    )
+    parser.add_argument(
+        "--noise-scale",
+        type=float,
+        metavar="F",
+        help="an ensemble's latent noise times F (default: the model's own noise_scale)",
     )
     parser.add_argument("--handback-steps", type=int, default=100)
     parser.add_argument(

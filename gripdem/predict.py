@@ -113,7 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
         "checkpoint",
         type=Path,
         help="a .ckpt checkpoint, a .safetensors model file (outputs/.../checkpoints/best.*) "
-        "or a shipped model: pretrained:pbc, pretrained:lebc",
+        "or a shipped model: pretrained:pbc, pretrained:lebc, pretrained:pbc-ensemble, "
+        "pretrained:lebc-ensemble",
     )
     p.add_argument("data", type=Path, help="gripdem HDF5 dataset")
     p.add_argument("--start", type=int, default=0, metavar="FRAME", help="first observed frame")

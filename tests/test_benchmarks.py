@@ -5,6 +5,9 @@ table, and its figures are consistent. Timings themselves are never asserted."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -107,6 +110,31 @@ def test_surrogate_rollout_quick(run_script, tmp_path):
         assert max(data["blocks"]["overlap_per_frame"]["model"]) == 0.0
     assert "| target | measured (worst) | verdict |" in out
     assert "| spread/skill 0.8-1.2 at every frame 1-40 |" in out
+    # the ensemble's microstructure figure, ablation rows and model-card section, from the report
+    report_path = tmp_path / "surrogate_rollout.json"
+    root = Path(__file__).resolve().parents[1] / "experiments" / "analyses"
+
+    def analysis(name: str, *args: str) -> str:
+        proc = subprocess.run(
+            [sys.executable, str(root / f"{name}.py"), *args], capture_output=True, text=True
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return proc.stdout
+
+    analysis("microstructure_figure", str(report_path), "pbc", str(tmp_path / "m.png"))
+    assert (tmp_path / "m.png").stat().st_size > 10_000
+    metrics = tmp_path / "metrics.json"
+    metrics.write_text(
+        json.dumps({"test/rmse_ratio_constant_velocity": 0.9, "test/crps_over_d": 1})
+    )
+    rows = [
+        f"pbc|{label}|{metrics}|{report_path}|{entry}"
+        for label, entry in (("ensemble", "pbc"), ("deterministic", "pbc (reference)"))
+    ]
+    table = analysis(
+        "ensemble_ablation", "--row", rows[0], "--row", rows[1], "--out", str(tmp_path / "ablation")
+    )
+    assert "worst 20-frame block" in table and table.count("| pbc |") == 2
 
 
 def test_model_front_quick(run_script, tmp_path):

@@ -59,9 +59,42 @@ def _fmt(value: float, digits: int = 3) -> str:
     )
 
 
-def _worst(blocks: list[dict], key: str) -> float:
-    values = [abs(b[key] - 1) for b in blocks if not math.isnan(b.get(key, math.nan))]
-    return max(values) if values else math.nan
+def _range(blocks: list[dict], key: str) -> list[float]:
+    values = [b[key] for b in blocks if not math.isnan(b.get(key, math.nan))]
+    return [min(values), max(values)] if values else [math.nan, math.nan]
+
+
+def statistics_ranges(entry: dict) -> dict:
+    """Ranges ``[low, high]`` of a ``surrogate_rollout.py`` entry's statistics over its blocks
+    and members (model / truth ratios; g(r) L1 and overlap % their largest; spread/skill and
+    the rank histogram's bins ÷ uniform over frames 1-100, absent for a single member)."""
+    blocks = entry["blocks"]["blocks"] + [b for m in entry.get("member_blocks", []) for b in m]
+    out = {f"msd_{lag}": _range(blocks, f"ratio/msd_{lag}_over_d2") for lag in (1, 10, 100)}
+    for name in ("rms_non_affine_over_d", "coordination", "profile"):
+        out[name] = _range(blocks, f"ratio/{name}")
+    out["gr_l1"] = max(b["gr_l1"] for b in blocks)
+    out["overlap_pct"] = 100 * max(b["model/overlap_max"] for b in blocks)
+    if "diffusion" in entry:
+        truth = entry["diffusion"]["truth"]
+        ratios = [
+            v / t for m in entry["diffusion"]["members"] for v, t in zip(m, truth, strict=True)
+        ]
+        out["diffusion"] = [min(ratios), max(ratios)]
+    if entry.get("spread_skill"):
+        out["spread_skill"] = [min(entry["spread_skill"]), max(entry["spread_skill"])]
+    rank = entry.get("rank_histogram")
+    if rank:
+        out["rank_over_uniform"] = [min(rank) * len(rank), max(rank) * len(rank)]
+    return out
+
+
+def _dev(span: list[float] | None) -> float:
+    """The worst |ratio - 1| of a range."""
+    return math.nan if span is None else max(abs(span[0] - 1), abs(span[1] - 1))
+
+
+def _span(span: list[float] | None) -> str:
+    return "–" if span is None else f"{span[0]:.2f}-{span[1]:.2f}"
 
 
 def run_columns(metrics: dict) -> list[str]:
@@ -78,30 +111,17 @@ def run_columns(metrics: dict) -> list[str]:
 def surrogate_columns(entry: dict | None) -> list[str]:
     if entry is None:
         return ["–"] * 10
-    blocks = entry["blocks"]["blocks"] + [b for m in entry.get("member_blocks", []) for b in m]
-    msd = [_worst(blocks, f"ratio/msd_{lag}_over_d2") for lag in (1, 10, 100)]
-    diffusion = math.nan
-    if "diffusion" in entry:
-        truth = entry["diffusion"]["truth"]
-        diffusion = max(
-            abs(v / t - 1)
-            for member in entry["diffusion"]["members"]
-            for v, t in zip(member, truth, strict=True)
-        )
-    ss = entry.get("spread_skill")
-    rank = entry.get("rank_histogram")
-    uniform = 1.0 / len(rank) if rank else 1.0
-    overlap = 100 * max(b["model/overlap_max"] for b in blocks)
+    r = statistics_ranges(entry)
     return [
-        " / ".join(_fmt(v, 2) for v in msd),
-        _fmt(_worst(blocks, "ratio/rms_non_affine_over_d"), 2),
-        _fmt(_worst(blocks, "ratio/coordination"), 2),
-        _fmt(_worst(blocks, "ratio/profile"), 2),
-        _fmt(max(b["gr_l1"] for b in blocks), 2),
-        _fmt(diffusion, 2),
-        "–" if not ss else f"{min(ss):.2f}-{max(ss):.2f}",
-        "–" if not rank else f"{min(rank) / uniform:.2f}-{max(rank) / uniform:.2f}",
-        _fmt(overlap, 2),
+        " / ".join(_fmt(_dev(r[f"msd_{lag}"]), 2) for lag in (1, 10, 100)),
+        _fmt(_dev(r["rms_non_affine_over_d"]), 2),
+        _fmt(_dev(r["coordination"]), 2),
+        _fmt(_dev(r["profile"]), 2),
+        _fmt(r["gr_l1"], 2),
+        _fmt(_dev(r.get("diffusion")), 2),
+        _span(r.get("spread_skill")),
+        _span(r.get("rank_over_uniform")),
+        _fmt(r["overlap_pct"], 2),
         _fmt(entry["model_ms_per_frame"], 3),
     ]
 

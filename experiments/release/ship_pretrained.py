@@ -1,7 +1,7 @@
 """Ship trained runs as the package's pretrained models (``pretrained:NAME``).
 
     python experiments/release/ship_pretrained.py --run pbc=RUN_DIR lebc=RUN_DIR
-        [--data pbc=DATA.h5 lebc=DATA.h5]
+        [--data pbc=DATA.h5 lebc=DATA.h5] [--surrogate pbc-ensemble=REPORT.json]
     python experiments/release/ship_pretrained.py --split-cards pbc lebc
     python experiments/release/ship_pretrained.py --cards pbc lebc [--check]
 
@@ -12,6 +12,11 @@ scene, the generator and its configuration; read from ``--data`` when the run's 
 it) and its split plan (which simulations trained, validated and tested it: from the run's
 ``metrics.json`` when the card predates it) and written, atomically, to
 ``gripdem/inference/pretrained/NAME.safetensors`` with ``NAME.md``: the same card for people.
+
+``--surrogate NAME=REPORT.json`` adds the long-rollout statistics of a ``surrogate_rollout.py``
+report of that model (its scene's entry: ranges over the blocks and members, beside the
+deterministic reference's when the report has one) to the card: the shipped ensembles' cards
+say what their members were measured to do over 2000 frames.
 
 ``--split-cards NAME ...`` adds the split plan to shipped cards that predate it, in place (the
 same tensors): the plan the run made, rebuilt from the card (the data's sizes, the run's split,
@@ -40,8 +45,26 @@ from gripdem.inference.model_file import read_model_file, save_model_file
 from gripdem.inference.pretrained import FOLDER
 from gripdem.run import CONFIG_DIR
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "analyses"))
+from ensemble_ablation import statistics_ranges  # noqa: E402
+
+#: the long-rollout statistics a card shows: (key, label, target)
+SURROGATE_ROWS = (
+    ("coordination", "contacts within 1.01 d", "±5 %"),
+    ("gr_l1", "g(r) L1 distance (two DEM runs: ~0.014)", "≤ 0.03"),
+    ("msd_1", "non-affine MSD, lag 1", "±15 %"),
+    ("msd_10", "non-affine MSD, lag 10", "±15 %"),
+    ("msd_100", "non-affine MSD, lag 100", "±15 %"),
+    ("diffusion", "self-diffusion D (x, y, z)", "±20 %"),
+    ("profile", "flow profile", "±3 %"),
+    ("overlap_pct", "overlap (% of particles, worst frame)", "≤ 1 %"),
+    ("spread_skill", "spread/skill, frames 1-100", "0.8-1.2"),
+    ("rank_over_uniform", "rank histogram bins ÷ uniform, frames 1-100", "0.5-1.5"),
+)
+
 BASELINE_ROWS = (
     ("model", "test/rmse"),
+    ("the model it was fine-tuned from", "before/test/rmse"),
     ("constant velocity", "test/rmse_constant_velocity"),
     ("linear AR", "test/rmse_linear_ar"),
     ("mean flow", "test/rmse_mean_flow"),
@@ -107,6 +130,66 @@ def encoder_text(encoder: dict) -> str:
     )
 
 
+def surrogate_card(report_path: str, scene: str) -> dict:
+    """The card's long-rollout section from a ``surrogate_rollout.py`` report."""
+    report = json.loads(Path(report_path).read_text())
+    entry = report["scenes"][scene]
+    reference = report["scenes"].get(f"{scene} (reference)")
+    return {
+        "report": Path(report_path).name,
+        "truth": Path(entry["truth"]).name,
+        "frames": entry["frames"],
+        "block": entry["blocks"]["block"],
+        "members": entry["members"],
+        "members_with_statistics": 1 + len(entry.get("member_blocks", [])),
+        "seed": entry["seed"],
+        "settings": entry["settings"],
+        "ranges": statistics_ranges(entry),
+        "reference": None if reference is None else statistics_ranges(reference),
+        "member_cost_ms": entry.get("member_cost_ms"),
+    }
+
+
+def _cell(value) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, list):
+        return f"{value[0]:.3g}-{value[1]:.3g}"
+    return f"{value:.3g}"
+
+
+def surrogate_lines(hparams: dict, surrogate: dict) -> list[str]:
+    """The card's rollout settings and long-rollout statistics, for people."""
+    ranges, reference = surrogate["ranges"], surrogate.get("reference") or {}
+    lines = [
+        "## Rollouts",
+        "",
+        f"- contact capture {hparams.get('contact_capture', 0.0)} contact distances (pairs "
+        "closer are pulled into contact in the correction), noise inflation "
+        f"{hparams.get('noise_scale', 1.0)} (the members' latent noise times this outside "
+        "training); both recorded in the file and used by `gripdem.predict` unless "
+        "`--contact-capture` / `--noise-scale` say otherwise",
+        "",
+        f"Measured over {surrogate['frames']} frames of a DEM simulation it never saw "
+        f"(`{surrogate['truth']}`), {surrogate['members']} members (seed {surrogate['seed']}; "
+        f"statistics of {surrogate['members_with_statistics']}), per {surrogate['block']}-frame "
+        "block, model / truth (ranges over the blocks and members; report "
+        f"`{surrogate['report']}`):",
+        "",
+        "| statistic | target | members | deterministic model |",
+        "|---|---|---|---|",
+    ]
+    for key, label, target in SURROGATE_ROWS:
+        lines.append(
+            f"| {label} | {target} | {_cell(ranges.get(key))} | {_cell(reference.get(key))} |"
+        )
+    cost = surrogate.get("member_cost_ms") or {}
+    if cost:
+        parts = "; ".join(f"{name}: {ms:.2f}" for name, ms in cost.items())
+        lines += ["", f"ms per member and frame, interleaved in one run: {parts}"]
+    return lines + [""]
+
+
 def markdown_card(
     name: str, card: dict, size_bytes: int, n_weights: int, hparams: dict | None = None
 ) -> str:
@@ -120,10 +203,14 @@ def markdown_card(
     params = data["provenance"].get("parameters", {})
     scene_cfg, preset = params.get("scene", {}), params.get("preset", {})
     d = float(data["scene"]["diameter"])  # the training data's, as every model reads it
+    ensemble = int(dict((hparams or {}).get("encoder") or {}).get("noise_channels") or 0) > 0
+    what = (
+        "ensemble model (one forward pass is one member)" if ensemble else "default gripdem model"
+    )
     lines = [
         f"# pretrained:{name}",
         "",
-        f"The default gripdem model of the `{card['scene']}` scene (gripdem "
+        f"The {what} of the `{card['scene']}` scene (gripdem "
         f"{card['gripdem_version']}): `python -m gripdem.predict pretrained:{name} DATA.h5`, "
         f"or fine-tune with `python -m gripdem.run data.path=MINE.h5 scene={card['scene']} "
         f"model.init_from=pretrained:{name}`. {n_weights:,} weights, {size_bytes / 1e6:.2f} MB, "
@@ -165,7 +252,19 @@ def markdown_card(
     lines += ["", "RMSE at each horizon step / d:", ""]
     steps = sorted(k for k in metrics if k.startswith("test/rmse_step/"))
     lines.append(" ".join(f"{metrics[k] / d:.2e}" for k in steps))
-    return "\n".join(lines) + "\n"
+    if "test/crps_over_d" in metrics and ensemble:
+        lines += [
+            "",
+            f"An 8-member ensemble's mean is scored above; its CRPS / d "
+            f"{metrics['test/crps_over_d']:.3g}, spread/skill at step 1 / 10 "
+            f"{metrics.get('test/spread_skill_step/001', math.nan):.2f} / "
+            f"{metrics.get('test/spread_skill_step/010', math.nan):.2f}, rank histogram bins "
+            f"{metrics.get('test/rank_min_over_uniform', math.nan):.2f}-"
+            f"{metrics.get('test/rank_max_over_uniform', math.nan):.2f} of uniform.",
+        ]
+    if card.get("surrogate"):
+        lines += ["", *surrogate_lines(hparams or {}, card["surrogate"])]
+    return "\n".join(lines).rstrip("\n") + "\n"
 
 
 def write_shipped(name: str, model, card: dict) -> Path:
@@ -185,7 +284,7 @@ def write_shipped(name: str, model, card: dict) -> Path:
     return target
 
 
-def ship(name: str, run_dir: Path, data: str | None) -> Path:
+def ship(name: str, run_dir: Path, data: str | None, surrogate: str | None = None) -> Path:
     source = Path(run_dir) / "checkpoints" / "best.safetensors"
     model = load_checkpoint_model(source)
     _, _, card = read_model_file(source)
@@ -198,6 +297,8 @@ def ship(name: str, run_dir: Path, data: str | None) -> Path:
         summary = json.loads((Path(run_dir) / "metrics.json").read_text())["data"]
         card["training_data"]["split"] = {k: summary[k] for k in SPLIT_KEYS if k in summary}
     card["shipped_as"] = f"pretrained:{name}"
+    if surrogate:
+        card["surrogate"] = surrogate_card(surrogate, card["scene"])
     target = write_shipped(name, model, card)
     print(json.dumps({k: card["metrics"][k] for k in card["metrics"] if "ratio" in k}, indent=1))
     return target
@@ -243,6 +344,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--run", nargs="+", default=[], metavar="NAME=RUN_DIR")
     parser.add_argument("--data", nargs="+", default=[], metavar="NAME=DATA.h5")
+    parser.add_argument("--surrogate", nargs="+", default=[], metavar="NAME=REPORT.json")
     parser.add_argument("--split-cards", nargs="+", default=[], metavar="NAME")
     parser.add_argument("--cards", nargs="+", default=[], metavar="NAME")
     parser.add_argument("--check", action="store_true", help="with --cards: compare only")
@@ -253,9 +355,9 @@ def main(argv=None) -> int:
         parser.error("give --run NAME=RUN_DIR ..., --split-cards NAME ... or --cards NAME ...")
     for name in args.split_cards:
         split_card(name)
-    data = pairs(args.data, "--data")
+    data, reports = pairs(args.data, "--data"), pairs(args.surrogate, "--surrogate")
     for name, run_dir in pairs(args.run, "--run").items():
-        ship(name, Path(run_dir), data.get(name))
+        ship(name, Path(run_dir), data.get(name), reports.get(name))
     return 0
 
 

@@ -195,3 +195,28 @@ def test_a_noise_scale_for_a_deterministic_model_is_refused(
     assert main(argv) == 1
     assert "is a deterministic model (no latent noise to scale)" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_capturing_members_differ_and_the_same_seed_gives_the_same_members(tiny_pbc_path):
+    """A (perturbed) ensemble with its own capture and inflation, 3 members: the members
+    differ from each other, the same seed gives them again to the last bit, another seed
+    does not."""
+    from gripdem.inference.rollout import rollout
+
+    model, dm = smoke_model(tiny_pbc_path, "scene=pbc", "model=ensemble")
+    assert model.hparams.contact_capture > 0 and model.hparams.noise_scale > 1
+    perturb(model, scale=0.02)
+    k = int(model.hparams.history_len)
+    sim = dm.plan.test.sims[0]
+    observed = dm.datasets["test"].reader.read(sim, 0, k + 1)[None]
+    times = dm._times[[sim]][:, : k + 1]
+
+    def members(seed):
+        run = rollout(model, dm.meta, observed, times, 6, check_overlap=False, members=3, seed=seed)
+        assert sum(run.stepper.report.pulled) > 0
+        return run.predicted
+
+    first = members(7)
+    np.testing.assert_array_equal(first, members(7))
+    assert np.abs(first[0] - first[1]).max() > 0 and np.abs(first[1] - first[2]).max() > 0
+    assert np.abs(first - members(8)).max() > 0

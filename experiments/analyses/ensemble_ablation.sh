@@ -28,6 +28,7 @@ for s in pbc lebc; do
   rollout ${s}_ens_alone "${members[@]}" --noise-scale 1 --contact-capture 0 --contact-overlap 0
   rollout ${s}_ens_capture "${members[@]}" --noise-scale 1 --contact-overlap 0
   rollout ${s}_ens_inflation "${members[@]}" --contact-capture 0 --contact-overlap 0
+  rollout ${s}_ens_touching "${members[@]}" --contact-overlap 0
   "$python" experiments/analyses/microstructure_figure.py "$out/rollouts/${s}_chosen.json" $s \
     experiments/figures/ensemble_microstructure_$s.png
 done
@@ -39,13 +40,14 @@ json.dump(r(sys.argv[1], tensors=False)[2]['metrics'], open(sys.argv[2], 'w'))" 
     gripdem/inference/pretrained/$s.safetensors "$det"
   r=$out/rollouts
   plain=$out/${s}_plain/metrics.json ship=$out/${s}_ship/metrics.json
-  rows+=(--row "$s|deterministic, plain correction (exactly touching)|$det|$r/${s}_det_plain.json|$s")
+  rows+=(--row "$s|deterministic, pairs exactly touching|$det|$r/${s}_det_plain.json|$s")
   rows+=(--row "$s|deterministic + resting overlap|$det|$r/${s}_chosen.json|$s (reference)")
   rows+=(--row "$s|deterministic + contact capture ${capture[$s]}|$det|$r/${s}_det_capture.json|$s")
   rows+=(--row "$s|ensemble (lean encoder), no lever|$plain|$r/${s}_ens_alone.json|$s")
   rows+=(--row "$s|ensemble + contact capture ${capture[$s]}|$plain|$r/${s}_ens_capture.json|$s")
   rows+=(--row "$s|ensemble + inflation ${inflation[$s]}|$ship|$r/${s}_ens_inflation.json|$s")
-  rows+=(--row "$s|ensemble + capture + inflation + resting overlap (shipped)|$ship|$r/${s}_chosen.json|$s")
+  rows+=(--row "$s|shipped without the resting overlap|$ship|$r/${s}_ens_touching.json|$s")
+  rows+=(--row "$s|shipped: capture + inflation + resting overlap|$ship|$r/${s}_chosen.json|$s")
 done
 "$python" experiments/analyses/ensemble_ablation.py "${rows[@]}"
 if [ "${SHIP:-0}" = 1 ]; then

@@ -50,6 +50,7 @@ import torch
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
 from benchlib import load_yaml, machine_line, scene_dataset, set_threads, train_run  # noqa: E402
 from surrogate_handback import dem_seconds_per_frame, generator_config, handback_ratios  # noqa: E402
+from surrogate_options import add_correction_options, rollout_options, stepper_settings  # noqa: E402
 from surrogate_tables import summary_tables  # noqa: E402
 
 from gripdem.data.dataset_io import read_meta  # noqa: E402
@@ -67,10 +68,9 @@ from gripdem.evaluation.rollout_stats import (  # noqa: E402
     diffusion_coefficients,
 )
 from gripdem.inference.checkpoint import load_model  # noqa: E402
-from gripdem.inference.contacts import CORRECTION_TOLERANCE  # noqa: E402
 from gripdem.inference.relaxation import DemRelaxation  # noqa: E402
 from gripdem.inference.rollout import rollout  # noqa: E402
-from gripdem.inference.stepper import PARTS, StepperSettings  # noqa: E402
+from gripdem.inference.stepper import PARTS  # noqa: E402
 from gripdem.models.baselines import predict_baseline  # noqa: E402
 from gripdem.plots.common import save_figure  # noqa: E402
 from gripdem.plots.rollout import plot_surrogate  # noqa: E402
@@ -153,25 +153,6 @@ def noise_floor(scene: str, preset: str, frames: int, block: int) -> dict:
     a, times = read_sim(path, meta.n_sims - 1, frames)
     b, _ = read_sim(path, meta.n_sims - 2, frames)
     return block_statistics(b, a, times, meta.boundary, meta.diameter, block=block)
-
-
-def stepper_settings(args, relaxation=None) -> StepperSettings:
-    """The stepper settings the options ask for (None: the stepper's and the model's own)."""
-    overlap = args.contact_overlap
-    return StepperSettings(
-        link=args.link,
-        contact_correction=not args.no_correction and relaxation is None,
-        correction_tolerance=args.correction_tolerance,
-        relaxation=relaxation,
-        contact_capture=args.contact_capture,
-        contact_overlap=None if overlap == "observed" else float(overlap),
-    )
-
-
-def rollout_options(model, args) -> None:
-    """``--noise-scale`` in place of the model's own inflation (an ensemble's ablation)."""
-    if args.noise_scale is not None:
-        model.hparams.noise_scale = float(args.noise_scale)
 
 
 def member_cost(checkpoint, reference, scene, args, preset, frames: int = 100, repeats: int = 3):
@@ -308,32 +289,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--block", type=int, default=100)
     parser.add_argument("--link", type=int, help="frames kept per forward pass")
     parser.add_argument("--no-correction", action="store_true")
-    parser.add_argument(
-        "--correction-tolerance",
-        type=float,
-        default=CORRECTION_TOLERANCE,
-        help="overlaps the contact correction leaves, in contact distances",
-    )
-    parser.add_argument(
-        "--contact-capture",
-        type=float,
-        metavar="GAP",
-        help="pairs closer than GAP contact distances are pulled into contact (default: the "
-        "model's own contact_capture)",
-    )
-    parser.add_argument(
-        "--contact-overlap",
-        default="observed",
-        metavar="F",
-        help="where corrected pairs end, a fraction of the contact distance inside it "
-        "(default observed: the observed frame's resting contacts; 0: exactly touching)",
-    )
-    parser.add_argument(
-        "--noise-scale",
-        type=float,
-        metavar="F",
-        help="an ensemble's latent noise times F (default: the model's own noise_scale)",
-    )
+    add_correction_options(parser)
     parser.add_argument("--handback-steps", type=int, default=100)
     parser.add_argument(
         "--relax-steps",

@@ -23,7 +23,7 @@ Captured contacts (``capture > 0``; off by default): the DEM's particles are coh
 Waals below a gap of 0.1 d, at its strongest below the regularisation gap 0.002 d), so a pair
 that comes that close snaps shut and stays in contact until a force pulls it apart; a model's
 small position errors leave pairs hovering at small gaps and open contacts at random instead
-(the contact-number deficit of long rollouts, docs/explanation/ensembles.md). With ``capture``,
+(the contact-number deficit of long rollouts, docs/how-to/ensembles.md#microstructure). With ``capture``,
 every pair whose gap is below ``capture`` contact distances is pulled into contact (to the same
 end point as a push), half each way, once, in the first sweep; a pair that the model moved
 further apart within one frame is let go (the contact breaks, as one that the flow pulls apart
@@ -120,13 +120,13 @@ def _sweep(q, i, j, cell_part, pairs, capture, distance, target, slack, moved, l
         move = overlap > slack
         if move:
             found += 1
-        scale = 0.5 * (target - dist) / max(dist, 1e-12 * distance)
-        if not move and capture > 0.0 and dist - target > 1e-9 * distance and -overlap < capture:
+        elif capture > 0.0 and dist - target > 1e-9 * distance and -overlap < capture:
             move = True
             pulled += 1
         if move:
             if not apply:
                 continue
+            scale = 0.5 * (target - dist) / max(dist, 1e-12 * distance)
             push = (scale * rx, scale * ry, scale * rz)
             for axis in range(3):
                 q[b, axis] += push[axis]

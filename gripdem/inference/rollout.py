@@ -28,6 +28,7 @@ ensemble), ``N`` particles, positions ``(rows, frames, N, 3)`` wrapped float64, 
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,6 +43,42 @@ from gripdem.inference.stepper import Stepper, StepperSettings
 ESCAPE_FRACTION = 0.25
 #: default: flag overlap once this many more particles overlap than at the observed frame
 OVERLAP_MARGIN = 0.05
+#: bytes a rollout holds per kept position value: the frames as kept, their concatenation and
+#: the copies a caller's scores make (float64, about 3 copies)
+BYTES_PER_POSITION = 3 * 8
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``; None where the
+    system does not say)."""
+    try:
+        with open("/proc/meminfo") as info:
+            for line in info:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def check_members_fit(members: int, sims: int, frames: int, particles: int) -> None:
+    """Refuse (ValueError naming ``members`` and the most that fit) an ensemble whose kept
+    trajectories ``members * sims`` rows of ``frames`` frames of ``particles`` positions would
+    not fit in the memory available now."""
+    free = available_memory()
+    if free is None or members <= 1:
+        return
+    per_member = int(sims) * int(frames) * int(particles) * 3 * BYTES_PER_POSITION
+    if members * per_member > free:
+        most = max(free // per_member, 1)
+        raise ValueError(
+            f"members {members}: {members} x {sims} simulation(s) x {frames} frames x "
+            f"{particles} particles need about {members * per_member / 2**30:.1f} GiB, "
+            f"{free / 2**30:.1f} GiB are available: at most {most} members fit (1..{most})"
+        )
 
 
 @dataclass
@@ -157,8 +194,11 @@ def rollout(
     link length, contact correction; default the stable setting). Stops early only at
     non-finite positions. The model must already be on its device. An ensemble model rolls
     out ``members`` members per simulation, its noise drawn from a generator seeded with
-    ``seed`` (None: torch's global generator)."""
-    observed, observed_times = ensemble_start(model, observed, observed_times, members, seed)
+    ``seed`` (None: torch's global generator); ``members`` beyond the memory available are
+    refused before anything is computed."""
+    observed, observed_times = ensemble_start(
+        model, observed, observed_times, members, seed, frames
+    )
     stepper = Stepper(model, observed, observed_times, settings)
     k = stepper.k
     div = Divergence()
@@ -188,10 +228,12 @@ def rollout(
     return Rollout(positions, np.concatenate(times, axis=1), k + 1, div, stepper, int(members))
 
 
-def ensemble_start(model, observed, observed_times, members: int, seed: int | None):
+def ensemble_start(
+    model, observed, observed_times, members: int, seed: int | None, frames: int = 0
+):
     """The observed frames and times repeated ``members`` times per simulation (member-minor
     rows), and the model's noise generator seeded; a deterministic model accepts only one
-    member."""
+    member, and members whose ``frames`` more frames would not fit in memory are refused."""
     members = int(members)
     if members < 1:
         raise ValueError(f"members must be >= 1, got {members}")
@@ -202,6 +244,8 @@ def ensemble_start(model, observed, observed_times, members: int, seed: int | No
                 f"rolls out one member, not {members} (--members 1)"
             )
         return observed, observed_times
+    shape = np.shape(observed)  # the members' rows of frames + K + 1 frames must fit
+    check_members_fit(members, shape[0], shape[1] + int(frames), shape[2])
     device = next(model.parameters()).device
     generator = torch.Generator(device=device)
     if seed is None:

@@ -315,6 +315,19 @@ def test_predict_rolls_out_ensemble_members(tmp_path, capsys, le_file, le_ensemb
     assert np.abs(p.pred_positions - p.baselines["constant_velocity"]).max() < 1e-15
 
 
+def test_more_members_than_memory_holds_are_refused_in_one_line(
+    tmp_path, capsys, le_file, le_ensemble_checkpoint
+):
+    """Ten million members of 3 simulations x 16 frames x 24 particles (about 80 KB each) do not
+    fit on any machine: one line naming the members and the most that fit; nothing written."""
+    out = tmp_path / "p.h5"
+    assert run(le_ensemble_checkpoint, le_file, out, "--start", 25, "--members", 10**7) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "members 10000000:" in err[0], err
+    assert re.search(r"GiB are available: at most \d+ members fit \(1\.\.\d+\)", err[0])
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_deterministic_model_has_no_members(tmp_path, capsys, le_file, le_checkpoint):
     assert run(le_checkpoint, le_file, tmp_path / "p.h5", "--members", 2) == 1
     err = capsys.readouterr().err.strip().splitlines()

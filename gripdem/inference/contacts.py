@@ -23,11 +23,11 @@ Captured contacts (``capture > 0``; off by default): the DEM's particles are coh
 Waals below a gap of 0.1 d, at its strongest below the regularisation gap 0.002 d), so a pair
 that comes that close snaps shut and stays in contact until a force pulls it apart; a model's
 small position errors leave pairs hovering at small gaps and open contacts at random instead
-(the contact-number deficit of long rollouts, docs/how-to/ensembles.md#microstructure). With ``capture``,
-every pair whose gap is below ``capture`` contact distances is pulled into contact (to the same
-end point as a push), half each way, once, in the first sweep; a pair that the model moved
-further apart within one frame is let go (the contact breaks, as one that the flow pulls apart
-does in the DEM). Pulls are pairwise like pushes (the centre of mass stays put), and the push
+(the contact-number deficit of long rollouts, docs/how-to/ensembles.md#microstructure). With
+``capture``, every pair whose gap is below ``capture`` contact distances is pulled into contact
+(to the same end point as a push), half each way, once, in the first sweep; a pair that the model
+moved further apart within one frame is let go (the contact breaks, as one that the flow pulls
+apart does in the DEM). Pulls are pairwise like pushes (the centre of mass stays put), and the push
 sweeps that follow remove any overlap a pull made, to the same tolerance. One pull per frame,
 not pulls to convergence: closing every opened contact in every sweep froze the measured
 suspension into a gel (coordination +20-30 %, the mean flow lost).
@@ -87,10 +87,7 @@ def resting_overlap(nl: NeighbourList, time: float, distance: float, tolerance: 
     that overlap by less than ``tolerance`` (the resting contacts a correction leaves alone;
     the built-in DEM's sit ~1e-5-1e-4 d inside contact, where elastic repulsion balances
     cohesion); 0 when no pair does."""
-    s = nl.state
-    cell_part = s.shift @ le_cell(nl.box, nl.unwrapped_offset(time))
-    close = _select(nl.q, s.i, s.j, cell_part, distance)
-    vec = nl.q[s.j[close]] - nl.q[s.i[close]] + cell_part[close]
+    _, _, vec = nl.pairs(time, distance)
     overlaps = 1.0 - np.sqrt(np.einsum("pc,pc->p", vec, vec)) / distance
     resting = overlaps[(overlaps > 0) & (overlaps < tolerance)]
     return float(np.median(resting)) if len(resting) else 0.0

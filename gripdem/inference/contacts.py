@@ -66,20 +66,26 @@ class Correction:
 
 
 @numba.njit(cache=True)
-def _select(q, i, j, cell_part, radius):
-    """Indices of the pairs closer than ``radius``."""
-    keep = np.empty(i.shape[0], dtype=np.int64)
+def _select(q, i, j, shift, cell, radius):
+    """The pairs closer than ``radius``, compacted: their particles ``a``, ``b`` and their
+    image parts ``shift @ cell`` (contiguous, so that the sweeps read them in order)."""
     count = 0
+    keep = np.empty(i.shape[0], dtype=np.int64)
+    part = np.empty((i.shape[0], 3))
     r2 = radius * radius
     for p in range(i.shape[0]):
         a, b = i[p], j[p]
-        rx = q[b, 0] - q[a, 0] + cell_part[p, 0]
-        ry = q[b, 1] - q[a, 1] + cell_part[p, 1]
-        rz = q[b, 2] - q[a, 2] + cell_part[p, 2]
+        px = shift[p, 0] * cell[0, 0] + shift[p, 1] * cell[1, 0] + shift[p, 2] * cell[2, 0]
+        py = shift[p, 0] * cell[0, 1] + shift[p, 1] * cell[1, 1] + shift[p, 2] * cell[2, 1]
+        pz = shift[p, 0] * cell[0, 2] + shift[p, 1] * cell[1, 2] + shift[p, 2] * cell[2, 2]
+        rx = q[b, 0] - q[a, 0] + px
+        ry = q[b, 1] - q[a, 1] + py
+        rz = q[b, 2] - q[a, 2] + pz
         if rx * rx + ry * ry + rz * rz < r2:
             keep[count] = p
+            part[count, 0], part[count, 1], part[count, 2] = px, py, pz
             count += 1
-    return keep[:count]
+    return i[keep[:count]], j[keep[:count]], part[:count].copy()
 
 
 def resting_overlap(nl: NeighbourList, time: float, distance: float, tolerance: float) -> float:
@@ -94,18 +100,17 @@ def resting_overlap(nl: NeighbourList, time: float, distance: float, tolerance: 
 
 
 @numba.njit(cache=True)
-def _sweep(q, i, j, cell_part, pairs, capture, distance, target, slack, moved, limit, apply):
-    """One Gauss-Seidel sweep over ``pairs``: each pair overlapping ``distance`` by more than
-    ``slack`` is pushed apart to ``target``, half each way, at once (only counted when not
-    ``apply``); a pair farther than ``target`` with a gap below ``capture`` is pulled to
+def _sweep(q, i, j, cell_part, capture, distance, target, slack, moved, limit):
+    """One Gauss-Seidel sweep over the candidate pairs (:func:`_select`'s): each pair
+    overlapping ``distance`` by more than ``slack`` is pushed apart to ``target``, half each
+    way, at once; a pair farther than ``target`` with a gap below ``capture`` is pulled to
     ``target`` the same way. Returns (overlapping pairs found, largest overlap found, a
     particle's accumulated move exceeded ``limit``, pairs pulled)."""
     found = 0
     pulled = 0
     worst = 0.0
     far = False
-    for k in range(pairs.shape[0]):
-        p = pairs[k]
+    for p in range(i.shape[0]):
         a, b = i[p], j[p]
         rx = q[b, 0] - q[a, 0] + cell_part[p, 0]
         ry = q[b, 1] - q[a, 1] + cell_part[p, 1]
@@ -121,8 +126,6 @@ def _sweep(q, i, j, cell_part, pairs, capture, distance, target, slack, moved, l
             move = True
             pulled += 1
         if move:
-            if not apply:
-                continue
             scale = 0.5 * (target - dist) / max(dist, 1e-12 * distance)
             push = (scale * rx, scale * ry, scale * rz)
             for axis in range(3):
@@ -153,28 +156,27 @@ def push_apart(
     s = nl.state
     q = nl.q
     start = q.copy()
-    cell_part = s.shift @ le_cell(nl.box, nl.unwrapped_offset(time))
+    cell = le_cell(nl.box, nl.unwrapped_offset(time))
     slack = tolerance * distance
     target = (1.0 - overlap) * distance
     reach = CANDIDATE_MARGIN + max(capture, 0.0)
     margin = (reach - 1.0) * distance
     limit = 0.25 * margin * margin
-    pairs = _select(q, s.i, s.j, cell_part, reach * distance)
+    candidates = _select(q, s.i, s.j, s.shift, cell, reach * distance)
     moved = np.zeros_like(q)
     # each sweep counts the overlaps it meets and pushes them apart; the first sweep's count is
     # the frame's overlaps before the correction, a sweep that meets none ends it; captured
     # pairs are pulled in the first sweep only, later sweeps push
-    sweep = (s.i, s.j, cell_part)
     before, worst_before, far, pulled = _sweep(
-        q, *sweep, pairs, capture * distance, distance, target, slack, moved, limit, True
+        q, *candidates, capture * distance, distance, target, slack, moved, limit
     )
     after, worst_after, done = before, worst_before, 1
     while after and done <= sweeps:
         if far:  # an outside pair may touch now: choose the candidates again
-            pairs = _select(q, s.i, s.j, cell_part, reach * distance)
+            candidates = _select(q, s.i, s.j, s.shift, cell, reach * distance)
             moved[:] = 0.0
         after, worst_after, far, _ = _sweep(
-            q, *sweep, pairs, 0.0, distance, target, slack, moved, limit, True
+            q, *candidates, 0.0, distance, target, slack, moved, limit
         )
         done += 1
     worst_before, worst_after = max(worst_before, 0.0) / distance, max(worst_after, 0.0) / distance

@@ -248,9 +248,18 @@ class ContactEncoder(nn.Module):
                 raise ValueError(f"encoder expects {self.static_features} static features")
             node = torch.cat([node, static.reshape(b * n, -1).to(node.dtype)], dim=-1)
         h = self.node_in(node.to(dtype))
-        e = self.edge_in(self.edge_inputs(flat, graph).to(dtype))
+        edge_x = self.edge_inputs(flat, graph).to(dtype)
+        # without edge updates every round reads the edge MLP's output through its own linear
+        # first layer: both linear maps fold into one (see _summed_messages), so the rounds
+        # start from the edge MLP's hidden layer
+        folded = not self.edge_update
+        if folded:
+            e = nn.functional.silu(self.edge_in[0](edge_x), inplace=not torch.is_grad_enabled())
+        else:
+            e = self.edge_in(edge_x)
         z = self._noise(noise, b, n)
         index = graph.edge_index
+        degree = self._degree(index[0], h) if folded else None
         if z is not None and self.noise_neighbours:
             count = torch.zeros_like(z[:, :1]).index_add_(
                 0, index[0], torch.ones_like(index[0], dtype=z.dtype)[:, None]
@@ -261,12 +270,63 @@ class ContactEncoder(nn.Module):
         ):
             if z is not None and r in self.noise_places:
                 h = h + self.noise_embedding[self.noise_places.index(r)](z)
-            update = self.edge_update[r] if r < len(self.edge_update) else None
-            incoming, e = self._pairs(message, update, h, e, index)
+            if folded:
+                incoming = self._summed_messages(message, h, e, index, degree)
+            else:
+                incoming, e = self._pairs(
+                    message, self.edge_update[r] if r < len(self.edge_update) else None, h, e, index
+                )
             h = h + node_update(torch.cat([h, incoming], dim=-1))
         if z is not None and len(self.message) in self.noise_places:
             h = h + self.noise_embedding[-1](z)
         return h.reshape(b, n, 1, -1).to(history.dtype)
+
+    @staticmethod
+    def _degree(receivers: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+        """Edges per receiving node ``(nodes, 1)`` in the latents' dtype."""
+        count = torch.bincount(receivers, minlength=h.shape[0])
+        return count.to(h.dtype)[:, None]
+
+    def _summed_messages(
+        self,
+        message: PairMLP,
+        h: torch.Tensor,
+        hidden: torch.Tensor,
+        index: torch.Tensor,
+        degree: torch.Tensor,
+    ) -> torch.Tensor:
+        """One round's summed incoming messages ``(nodes, P)`` from h ``(nodes, C)`` and the
+        edge MLP's hidden layer ``(E, P)`` (no edge updates), with no product per edge but one:
+
+        - the edge MLP's output layer ``e = W2 a + b2`` and the message's edge term ``We e``
+          are both linear, so ``We e = (We W2) a + We b2``; the bias is per round, added to
+          the receiver's node term;
+        - the message's output layer is linear too, so the sum over a receiver's edges
+          ``sum_j (Wo s_ij + bo) = Wo (sum_j s_ij) + deg_i bo`` is taken over the hidden
+          activations ``s_ij`` and the output layer runs once per node.
+
+        The same function as :meth:`PairMLP.forward` summed with ``index_add`` (the rounding
+        differs). Without gradients the edges go in blocks of :attr:`edge_chunk`."""
+        out_layer = self.edge_in[-1]
+        edge_weight = message.edge.weight @ out_layer.weight  # (P, P)
+        receiver, sender = message.node_terms(h)
+        receiver = receiver + message.edge.weight @ out_layer.bias
+        n_edges = index.shape[1]
+        grad = torch.is_grad_enabled()
+        chunk = n_edges if grad or self.edge_chunk <= 0 else int(self.edge_chunk)
+        summed = h.new_zeros(h.shape[0], edge_weight.shape[0])
+        for start in range(0, max(n_edges, 1), max(chunk, 1)):
+            block = slice(start, start + chunk)
+            i, j = index[0, block], index[1, block]
+            first = hidden[block] @ edge_weight.T
+            if grad:
+                first = first + receiver.index_select(0, i) + sender.index_select(0, j)
+                summed = summed.index_add(0, i, nn.functional.silu(first))
+            else:  # in place: no temporaries per block
+                first += receiver.index_select(0, i)
+                first += sender.index_select(0, j)
+                summed.index_add_(0, i, nn.functional.silu(first, inplace=True))
+        return nn.functional.linear(summed, message.out.weight) + degree * message.out.bias
 
     def _pairs(
         self,

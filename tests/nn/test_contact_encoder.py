@@ -154,6 +154,44 @@ def test_chunked_rounds_equal_the_unchunked(edge_updates):
     )
 
 
+def per_edge_messages(encoder, history, graph):
+    """The encoder without edge updates written out per edge (every message through both
+    layers of its MLP, summed with index_add): the reference of the folded rounds."""
+    b, n, k, _ = history.shape
+    flat = history.reshape(b * n, k, 3)
+    h = encoder.node_in(flat.reshape(b * n, 3 * k))
+    e = encoder.edge_in(encoder.edge_inputs(flat, graph))
+    for message, node_update in zip(encoder.message, encoder.node_update, strict=True):
+        msg = message(h, e, graph.edge_index)
+        incoming = h.new_zeros(h.shape[0], msg.shape[1]).index_add_(0, graph.edge_index[0], msg)
+        h = h + node_update(torch.cat([h, incoming], dim=-1))
+    return h.reshape(b, n, 1, -1)
+
+
+@pytest.mark.parametrize("grad", [True, False])
+def test_folded_rounds_are_the_per_edge_messages(grad):
+    """Without edge updates the rounds fold the linear layers around each edge (the edge
+    MLP's output into the message's edge term, the message's output past the sum): in float64
+    the same function as every message computed per edge and summed, to round-off, with and
+    without gradients (blocks of edges), for nodes with no edge too."""
+    torch.manual_seed(0)
+    encoder = ContactEncoder(
+        history_len=5, channels=16, rounds=3, edge_updates=False, pair_channels=8
+    ).double()
+    for layer in (encoder.edge_in[-1], *(m.out for m in encoder.message)):  # nonzero biases
+        torch.nn.init.normal_(layer.bias)
+    encoder.edge_chunk = 7
+    graph = random_contacts(2, 60, 50)  # 100 edges over 120 nodes: some receive none
+    graph.vector, graph.gap = graph.vector.double(), graph.gap.double()
+    history = torch.randn(2, 60, 5, 3, dtype=torch.float64)
+    assert torch.bincount(graph.edge_index[0], minlength=120).eq(0).any()
+    with torch.set_grad_enabled(grad):
+        folded = encoder(history, None, graph)
+        reference = per_edge_messages(encoder, history, graph)
+    torch.testing.assert_close(folded, reference, atol=1e-12, rtol=1e-12)
+    assert (folded - reference).abs().max() < 1e-12 * reference.abs().max()
+
+
 def test_narrow_pair_channels_keep_the_node_latents():
     encoder = ContactEncoder(history_len=4, channels=32, rounds=2, pair_channels=8)
     out = encoder(torch.randn(1, 20, 4, 3), None, random_contacts(1, 20, 80))

@@ -5,7 +5,8 @@ DEM: ~1e-5 d), and a model's frame that packs particles into each other is outsi
 it was trained on and explodes when handed back to a DEM
 (docs/spec/long-rollouts.md#overlaps-first). After each predicted frame the overlapping pairs of the
 neighbour list are pushed apart along their centre line, each particle by half the overlap
-(Gauss-Seidel sweeps over the candidate pairs, compiled with numba), until no pair is closer than
+(Gauss-Seidel sweeps over the candidate pairs, compiled with numba; after the first, a sweep
+visits only the pairs of particles that the sweep before moved), until no pair is closer than
 ``distance * (1 - tolerance)`` or ``sweeps`` are done. Every push moves two particles by opposite
 amounts: the centre of mass does not move, so a correction cannot make the suspension drift.
 
@@ -63,6 +64,8 @@ class Correction:
     rms_push: float
     #: pairs pulled into contact (capture, first sweep)
     pulled: int = 0
+    #: how far the correction moved each particle ``(N, 3)`` (length units)
+    moves: np.ndarray | None = None
 
 
 @numba.njit(cache=True)
@@ -100,17 +103,19 @@ def resting_overlap(nl: NeighbourList, time: float, distance: float, tolerance: 
 
 
 @numba.njit(cache=True)
-def _sweep(q, i, j, cell_part, capture, distance, target, slack, moved, limit):
-    """One Gauss-Seidel sweep over the candidate pairs (:func:`_select`'s): each pair
-    overlapping ``distance`` by more than ``slack`` is pushed apart to ``target``, half each
-    way, at once; a pair farther than ``target`` with a gap below ``capture`` is pulled to
-    ``target`` the same way. Returns (overlapping pairs found, largest overlap found, a
-    particle's accumulated move exceeded ``limit``, pairs pulled)."""
+def _sweep(q, i, j, cell_part, active, capture, distance, target, slack, moved, limit, touched):
+    """One Gauss-Seidel sweep over the candidate pairs ``active`` (indices into
+    :func:`_select`'s arrays, in order): each pair overlapping ``distance`` by more than
+    ``slack`` is pushed apart to ``target``, half each way, at once; a pair farther than
+    ``target`` with a gap below ``capture`` is pulled to ``target`` the same way. The particles
+    it moves are marked in ``touched``. Returns (overlapping pairs found, largest overlap
+    found, a particle's accumulated move exceeded ``limit``, pairs pulled)."""
     found = 0
     pulled = 0
     worst = 0.0
     far = False
-    for p in range(i.shape[0]):
+    for k in range(active.shape[0]):
+        p = active[k]
         a, b = i[p], j[p]
         rx = q[b, 0] - q[a, 0] + cell_part[p, 0]
         ry = q[b, 1] - q[a, 1] + cell_part[p, 1]
@@ -133,10 +138,54 @@ def _sweep(q, i, j, cell_part, capture, distance, target, slack, moved, limit):
                 q[a, axis] -= push[axis]
                 moved[b, axis] += push[axis]
                 moved[a, axis] -= push[axis]
+            touched[a] = touched[b] = True
             for c in (a, b):
                 if moved[c, 0] ** 2 + moved[c, 1] ** 2 + moved[c, 2] ** 2 > limit:
                     far = True
     return found, worst, far, pulled
+
+
+@numba.njit(cache=True)
+def _touching(i, j, touched):
+    """Indices (in order) of the pairs with a particle in ``touched``; clears ``touched``."""
+    keep = np.empty(i.shape[0], dtype=np.int64)
+    count = 0
+    for p in range(i.shape[0]):
+        if touched[i[p]] or touched[j[p]]:
+            keep[count] = p
+            count += 1
+    touched[:] = False
+    return keep[:count]
+
+
+@numba.njit(cache=True)
+def _correct(q, i, j, shift, cell, reach, capture, distance, target, slack, limit, sweeps):
+    """The sweeps of :func:`push_apart` (lengths in position units). The first sweep visits
+    every candidate; each later one only the pairs with a particle that the sweep before
+    moved: a pair whose particles have not moved since it was last found apart is still apart
+    (the same fixed point as full sweeps, a fraction of the work once few chains are left).
+    Returns (overlaps before, worst before, pulled, overlaps after, worst after, sweeps)."""
+    a, b, part = _select(q, i, j, shift, cell, reach)
+    moved = np.zeros_like(q)
+    touched = np.zeros(q.shape[0], dtype=np.bool_)
+    every = np.arange(a.shape[0])
+    before, worst_before, far, pulled = _sweep(
+        q, a, b, part, every, capture, distance, target, slack, moved, limit, touched
+    )
+    after, worst_after, done = before, worst_before, 1
+    while after and done <= sweeps:
+        if far:  # an outside pair may touch now: choose the candidates again, visit them all
+            a, b, part = _select(q, i, j, shift, cell, reach)
+            moved[:] = 0.0
+            touched[:] = False
+            active = np.arange(a.shape[0])
+        else:
+            active = _touching(a, b, touched)
+        after, worst_after, far, _ = _sweep(
+            q, a, b, part, active, 0.0, distance, target, slack, moved, limit, touched
+        )
+        done += 1
+    return before, worst_before, pulled, after, worst_after, done
 
 
 def push_apart(
@@ -157,29 +206,16 @@ def push_apart(
     q = nl.q
     start = q.copy()
     cell = le_cell(nl.box, nl.unwrapped_offset(time))
-    slack = tolerance * distance
-    target = (1.0 - overlap) * distance
     reach = CANDIDATE_MARGIN + max(capture, 0.0)
     margin = (reach - 1.0) * distance
-    limit = 0.25 * margin * margin
-    candidates = _select(q, s.i, s.j, s.shift, cell, reach * distance)
-    moved = np.zeros_like(q)
     # each sweep counts the overlaps it meets and pushes them apart; the first sweep's count is
     # the frame's overlaps before the correction, a sweep that meets none ends it; captured
     # pairs are pulled in the first sweep only, later sweeps push
-    before, worst_before, far, pulled = _sweep(
-        q, *candidates, capture * distance, distance, target, slack, moved, limit
-    )
-    after, worst_after, done = before, worst_before, 1
-    while after and done <= sweeps:
-        if far:  # an outside pair may touch now: choose the candidates again
-            candidates = _select(q, s.i, s.j, s.shift, cell, reach * distance)
-            moved[:] = 0.0
-        after, worst_after, far, _ = _sweep(
-            q, *candidates, 0.0, distance, target, slack, moved, limit
-        )
-        done += 1
+    before, worst_before, pulled, after, worst_after, done = _correct(
+        q, s.i, s.j, s.shift, cell, reach * distance, capture * distance, distance,
+        (1.0 - overlap) * distance, tolerance * distance, 0.25 * margin * margin, sweeps,
+    )  # fmt: skip
     worst_before, worst_after = max(worst_before, 0.0) / distance, max(worst_after, 0.0) / distance
-    shift = q - start
-    rms = float(np.sqrt(np.einsum("nc,nc->n", shift, shift).mean())) if len(q) else 0.0
-    return Correction(before, after, worst_before, worst_after, done, rms, pulled)
+    moves = q - start
+    rms = float(np.sqrt(np.einsum("nc,nc->n", moves, moves).mean())) if len(q) else 0.0
+    return Correction(before, after, worst_before, worst_after, done, rms, pulled, moves)

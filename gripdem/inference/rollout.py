@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from gripdem.boundary import displacement
 from gripdem.data.schema import DatasetMeta
 from gripdem.evaluation.physics import OVERLAP_TOLERANCE
 from gripdem.inference.stepper import Stepper, StepperSettings
@@ -141,28 +140,21 @@ class Rollout:
         return frames.reshape((self.n_sims, self.members) + frames.shape[1:])
 
 
-def _record(
-    div: Divergence, frames: np.ndarray, before: np.ndarray, offsets, meta: DatasetMeta, j0: int
-):
-    """Divergence checks of predicted frames ``(S, m, N, 3)`` (``before``: the frame preceding
-    them, ``offsets`` ``(S, m)``); ``j0``: 1-based index of the first. Returns the number of
-    leading finite frames."""
-    box, d = meta.box, meta.diameter
-    for j in range(frames.shape[1]):
-        frame = frames[:, j]
-        if not np.isfinite(frame).all():
-            div.first.setdefault("non_finite", j0 + j)
-            div.stopped = f"non-finite positions at predicted frame {j0 + j}"
-            return j
-        step = displacement(frame, before, box, offsets[:, j, None])
-        size = np.sqrt((step**2).sum(-1))
-        escaped = int((size > ESCAPE_FRACTION * float(box.lengths.min())).sum())
-        div.max_step_over_d.append(float(size.max() / d))
-        div.escaped.append(escaped)
-        if escaped:
-            div.first.setdefault("escaped", j0 + j)
-        before = frame
-    return frames.shape[1]
+def _record(div: Divergence, frame: np.ndarray, steps: np.ndarray, meta: DatasetMeta, j: int):
+    """Divergence checks of the predicted frame ``(S, N, 3)`` and its steps from the frame
+    before it ``(S, N, 3)`` (minimum image); ``j``: its 1-based index. Returns whether it is
+    finite."""
+    if not np.isfinite(frame).all():
+        div.first.setdefault("non_finite", j)
+        div.stopped = f"non-finite positions at predicted frame {j}"
+        return False
+    size = np.sqrt(np.einsum("snc,snc->sn", steps, steps))
+    escaped = int((size > ESCAPE_FRACTION * float(meta.box.lengths.min())).sum())
+    div.max_step_over_d.append(float(size.max() / meta.diameter))
+    div.escaped.append(escaped)
+    if escaped:
+        div.first.setdefault("escaped", j)
+    return True
 
 
 def overlap_fraction(stepper: Stepper, tolerance: float = OVERLAP_TOLERANCE) -> float:
@@ -210,8 +202,7 @@ def rollout(
     while done < frames:
         new = stepper.advance(1)
         if new.shape[1]:
-            offsets = meta.boundary.offset(stepper.times[:, -1:])
-            _record(div, new, kept[-1][:, -1], offsets, meta, done + 1)
+            _record(div, new[:, 0], stepper.last_steps, meta, done + 1)
             kept.append(new)
             times.append(stepper.times[:, -1:].copy())
             if check_overlap:

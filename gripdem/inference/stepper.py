@@ -24,7 +24,6 @@ Shapes: ``S`` simulations advanced together (one batch), ``N`` particles; frames
 
 from __future__ import annotations
 
-import copy
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -41,7 +40,7 @@ from gripdem.inference.contacts import (
     push_apart,
     resting_overlap,
 )
-from gripdem.inference.precision import resolve_precision, set_encoder_precision
+from gripdem.inference.precision import resolve_precision, with_encoder_precision
 from gripdem.models.ensemble import check_contact_capture
 
 PARTS = ("neighbour_list", "features", "forward", "decode_wrap", "correction", "relaxation")
@@ -123,13 +122,13 @@ class Stepper:
     def __init__(self, model, observed: np.ndarray, times: np.ndarray, settings=None):
         self.settings = settings or StepperSettings()
         self.precision = resolve_precision(self.settings.precision, next(model.parameters()).device)
-        if self.precision != "fp32":
-            model = copy.deepcopy(model)
-            set_encoder_precision(model, self.precision)
+        model = with_encoder_precision(model, self.precision)
         self.model = model.eval()
         if self.settings.compile:
             compile_encoder(model)
         self.stopped: str | None = None
+        #: the newest kept frame's step from the frame before it ``(S, N, 3)`` (minimum image)
+        self.last_steps: np.ndarray | None = None
         self._pending: list | None = None  # the current link: frames, times, offsets, next, carry
         self.k = int(model.hparams.history_len)
         self.f = int(model.hparams.horizon)
@@ -239,42 +238,61 @@ class Stepper:
         return predicted, future_times, offsets[:, self.k + 1 :]
 
     # ---- frames ---------------------------------------------------------------------------
-    def _accept(self, frame: np.ndarray, times: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    def _accept(
+        self, frame: np.ndarray, times: np.ndarray, offsets: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Move the lists to a predicted frame ``(S, N, 3)``, correct it, add it to the state;
-        returns the frame as kept."""
+        returns the frame as kept and how far the relaxation and the correction moved each
+        particle ``(S, N, 3)`` (the carry of the link's later frames)."""
+        moved = np.zeros_like(frame)
         if self.settings.relaxation is not None:
             started = time.perf_counter()
-            frame = frame.copy()
+            relaxed = frame.copy()
             for sim in range(len(frame)):
                 pair_times = np.array([self.times[sim, -1], times[sim]])
-                frame[sim] = self.settings.relaxation(self.frames[sim, -1], frame[sim], pair_times)
+                relaxed[sim] = self.settings.relaxation(
+                    self.frames[sim, -1], frame[sim], pair_times
+                )
+            moved += minimum_image(relaxed - frame, self.box, offsets[:, None])
+            frame = relaxed
             self.seconds["relaxation"] += time.perf_counter() - started
         kept = frame.copy()
+        self.last_steps = np.empty_like(frame)
         for sim, nl in enumerate(self.lists):
             started = time.perf_counter()
+            before, builds = nl.q, nl.builds  # the previous kept frame's physical images
             nl.update(frame[sim], float(offsets[sim]), float(times[sim]))
             self.seconds["neighbour_list"] += time.perf_counter() - started
             if self.settings.contact_correction:
                 started = time.perf_counter()
-                corr = self._correct(nl, float(times[sim]), float(offsets[sim]), sim)
+                corr = self._correct(nl, float(times[sim]), float(offsets[sim]), moved[sim])
                 self._record(corr, sim)
                 kept[sim] = wrap_positions(nl.q, self.box, float(offsets[sim]))
                 self.seconds["correction"] += time.perf_counter() - started
+            if nl.builds == builds:  # the same images followed: the step is their difference
+                self.last_steps[sim] = nl.q - before
+            else:
+                last = self.frames[sim, -1]
+                self.last_steps[sim] = minimum_image(kept[sim] - last, self.box, offsets[sim])
         self.frames = np.concatenate([self.frames[:, 1:], kept[:, None]], axis=1)
         self.times = np.concatenate([self.times[:, 1:], times[:, None]], axis=1)
-        return kept
+        return kept, moved
 
-    def _correct(self, nl: NeighbourList, time: float, offset: float, sim: int) -> Correction:
-        """Push overlapping pairs apart (and pull captured pairs into contact); when the moves
-        made the list stale, rebuild it at the corrected frame and correct again (pairs it did
-        not list may touch now)."""
+    def _correct(
+        self, nl: NeighbourList, time: float, offset: float, moved: np.ndarray
+    ) -> Correction:
+        """Push overlapping pairs apart (and pull captured pairs into contact), adding each
+        particle's move to ``moved`` ``(N, 3)``; when the moves made the list stale, rebuild it
+        at the corrected frame and correct again (pairs it did not list may touch now)."""
         distance = self.settings.contact_distance * self.d
         sweeps, tolerance = self.settings.correction_sweeps, self.settings.correction_tolerance
         pulls = (self.capture, self.overlap)
         corr = push_apart(nl, time, distance, sweeps, tolerance, *pulls)
+        moved += corr.moves
         if nl.stale(nl.q, time):
             nl.build(wrap_positions(nl.q, self.box, offset), offset, time)
             again = push_apart(nl, time, distance, sweeps, tolerance, *pulls)
+            moved += again.moves
             corr.overlapping_after, corr.worst_after = again.overlapping_after, again.worst_after
         return corr
 
@@ -307,8 +325,8 @@ class Stepper:
                 self.stopped = f"non-finite positions predicted {self.n_predicted + 1} frames in"
                 break
             frame = wrap_positions(moved, self.box, offsets[:, j, None])
-            kept = self._accept(frame, times[:, j], offsets[:, j])
-            self._pending[4] = carry + minimum_image(kept - frame, self.box, offsets[:, j, None])
+            kept, corrected = self._accept(frame, times[:, j], offsets[:, j])
+            self._pending[4] = carry + corrected
             self._pending[3] = j + 1
             self.n_predicted += 1
             out.append(kept)

@@ -157,26 +157,27 @@ class LinearAR:
                 obs_off = torch.as_tensor(observed_offsets, dtype=torch.float64)[:, None, :]
             rel, _ = _flow_relative_steps(observed, boundary.box, obs_off, self.strain)
         weights = torch.tensor(self.weights, dtype=torch.float64, device=observed.device)
-        lagged = 3 * self.lags
-        # the features of :func:`_features` in one buffer: the lags (lag 1 first) shift by one
-        # step each time, the newest step goes in front; the same product as the fit's
-        features = torch.ones(rel.shape[:-2] + (self.n_features,), dtype=torch.float64,
-                              device=observed.device)  # fmt: skip
-        features[..., :lagged] = rel[..., -self.lags :, :].flip(-2).flatten(-2)
+        lags = self.lags
+        # the lag weights in time order (oldest lag first), so that each step's features are a
+        # window of one buffer of the steps (a strided view: nothing copied per step); the
+        # same product as the fit's features (lag 1 first), summed in another order
+        by_time = weights[: 3 * lags].reshape(lags, 3, 3).flip(0).reshape(3 * lags, 3)
+        sin_w, cos_w, bias = weights[3 * lags], weights[3 * lags + 1], weights[3 * lags + 2]
+        buffer = torch.empty(rel.shape[:-2] + (lags + horizon, 3), dtype=torch.float64,
+                             device=observed.device)  # fmt: skip
+        buffer[..., :lags, :] = rel[..., -lags:, :]
         x = observed[..., -1, 0]
+        x_start = torch.empty_like(buffer[..., lags:, 0])  # each step's starting x
         theta_scale = 2 * math.pi / self.lx
-        steps = torch.empty(rel.shape[:-2] + (horizon, 3), dtype=torch.float64, device=x.device)
         for s in range(horizon):
             theta = theta_scale * x
-            features[..., lagged] = torch.sin(theta)
-            features[..., lagged + 1] = torch.cos(theta)
-            step_rel = features @ weights
-            step = add_affine_flow(step_rel, x, self.strain)
-            steps[..., s, :] = step
-            x = x + step[..., 0]
-            features[..., 3:lagged] = features[..., : lagged - 3].clone()
-            features[..., :3] = step_rel
-        return steps
+            step_rel = buffer[..., s : s + lags, :].flatten(-2) @ by_time + bias
+            step_rel += torch.sin(theta)[..., None] * sin_w
+            step_rel += torch.cos(theta)[..., None] * cos_w
+            buffer[..., lags + s, :] = step_rel
+            x_start[..., s] = x
+            x = x + step_rel[..., 0]  # the affine flow is along z: x moves as relative
+        return add_affine_flow(buffer[..., lags:, :], x_start, self.strain)
 
     def predict(
         self,

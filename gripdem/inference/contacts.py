@@ -5,8 +5,7 @@ DEM: ~1e-5 d), and a model's frame that packs particles into each other is outsi
 it was trained on and explodes when handed back to a DEM
 (docs/spec/long-rollouts.md#overlaps-first). After each predicted frame the overlapping pairs of the
 neighbour list are pushed apart along their centre line, each particle by half the overlap
-(Gauss-Seidel sweeps over the candidate pairs, compiled with numba; after the first, a sweep
-visits only the pairs of particles that the sweep before moved), until no pair is closer than
+(Gauss-Seidel sweeps over the candidate pairs, compiled with numba), until no pair is closer than
 ``distance * (1 - tolerance)`` or ``sweeps`` are done. Every push moves two particles by opposite
 amounts: the centre of mass does not move, so a correction cannot make the suspension drift.
 
@@ -103,19 +102,17 @@ def resting_overlap(nl: NeighbourList, time: float, distance: float, tolerance: 
 
 
 @numba.njit(cache=True)
-def _sweep(q, i, j, cell_part, active, capture, distance, target, slack, moved, limit, touched):
-    """One Gauss-Seidel sweep over the candidate pairs ``active`` (indices into
-    :func:`_select`'s arrays, in order): each pair overlapping ``distance`` by more than
-    ``slack`` is pushed apart to ``target``, half each way, at once; a pair farther than
-    ``target`` with a gap below ``capture`` is pulled to ``target`` the same way. The particles
-    it moves are marked in ``touched``. Returns (overlapping pairs found, largest overlap
-    found, a particle's accumulated move exceeded ``limit``, pairs pulled)."""
+def _sweep(q, i, j, cell_part, capture, distance, target, slack, moved, limit):
+    """One Gauss-Seidel sweep over the candidate pairs (:func:`_select`'s arrays, in order):
+    each pair overlapping ``distance`` by more than ``slack`` is pushed apart to ``target``,
+    half each way, at once; a pair farther than ``target`` with a gap below ``capture`` is
+    pulled to ``target`` the same way. Returns (overlapping pairs found, largest overlap found,
+    a particle's accumulated move exceeded ``limit``, pairs pulled)."""
     found = 0
     pulled = 0
     worst = 0.0
     far = False
-    for k in range(active.shape[0]):
-        p = active[k]
+    for p in range(i.shape[0]):
         a, b = i[p], j[p]
         rx = q[b, 0] - q[a, 0] + cell_part[p, 0]
         ry = q[b, 1] - q[a, 1] + cell_part[p, 1]
@@ -138,7 +135,6 @@ def _sweep(q, i, j, cell_part, active, capture, distance, target, slack, moved, 
                 q[a, axis] -= push[axis]
                 moved[b, axis] += push[axis]
                 moved[a, axis] -= push[axis]
-            touched[a] = touched[b] = True
             for c in (a, b):
                 if moved[c, 0] ** 2 + moved[c, 1] ** 2 + moved[c, 2] ** 2 > limit:
                     far = True
@@ -146,43 +142,21 @@ def _sweep(q, i, j, cell_part, active, capture, distance, target, slack, moved, 
 
 
 @numba.njit(cache=True)
-def _touching(i, j, touched):
-    """Indices (in order) of the pairs with a particle in ``touched``; clears ``touched``."""
-    keep = np.empty(i.shape[0], dtype=np.int64)
-    count = 0
-    for p in range(i.shape[0]):
-        if touched[i[p]] or touched[j[p]]:
-            keep[count] = p
-            count += 1
-    touched[:] = False
-    return keep[:count]
-
-
-@numba.njit(cache=True)
 def _correct(q, i, j, shift, cell, reach, capture, distance, target, slack, limit, sweeps):
-    """The sweeps of :func:`push_apart` (lengths in position units). The first sweep visits
-    every candidate; each later one only the pairs with a particle that the sweep before
-    moved: a pair whose particles have not moved since it was last found apart is still apart
-    (the same fixed point as full sweeps, a fraction of the work once few chains are left).
+    """The sweeps of :func:`push_apart` (lengths in position units), in one compiled call.
     Returns (overlaps before, worst before, pulled, overlaps after, worst after, sweeps)."""
     a, b, part = _select(q, i, j, shift, cell, reach)
     moved = np.zeros_like(q)
-    touched = np.zeros(q.shape[0], dtype=np.bool_)
-    every = np.arange(a.shape[0])
     before, worst_before, far, pulled = _sweep(
-        q, a, b, part, every, capture, distance, target, slack, moved, limit, touched
+        q, a, b, part, capture, distance, target, slack, moved, limit
     )
     after, worst_after, done = before, worst_before, 1
     while after and done <= sweeps:
-        if far:  # an outside pair may touch now: choose the candidates again, visit them all
+        if far:  # an outside pair may touch now: choose the candidates again
             a, b, part = _select(q, i, j, shift, cell, reach)
             moved[:] = 0.0
-            touched[:] = False
-            active = np.arange(a.shape[0])
-        else:
-            active = _touching(a, b, touched)
         after, worst_after, far, _ = _sweep(
-            q, a, b, part, active, 0.0, distance, target, slack, moved, limit, touched
+            q, a, b, part, 0.0, distance, target, slack, moved, limit
         )
         done += 1
     return before, worst_before, pulled, after, worst_after, done

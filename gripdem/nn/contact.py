@@ -264,12 +264,10 @@ class ContactEncoder(nn.Module):
             e = self.edge_in(edge_x)
         z = self._noise(noise, b, n)
         index = graph.edge_index
-        degree = self._degree(index[0], h) if folded else None
-        if z is not None and self.noise_neighbours:
-            count = torch.zeros_like(z[:, :1]).index_add_(
-                0, index[0], torch.ones_like(index[0], dtype=z.dtype)[:, None]
-            )
-            z = z.index_add(0, index[0], z.index_select(0, index[1])) / torch.sqrt(1 + count)
+        shared = z is not None and self.noise_neighbours
+        degree = self._degree(index[0], h) if folded or shared else None
+        if shared:
+            z = z.index_add(0, index[0], z.index_select(0, index[1])) / torch.sqrt(1 + degree)
         for r, (message, node_update) in enumerate(
             zip(self.message, self.node_update, strict=True)
         ):

@@ -42,8 +42,12 @@ import numpy as np
 
 from gripdem.boundary import NeighbourList, le_cell
 
-#: candidate pairs: within this factor of the contact distance when chosen
-CANDIDATE_MARGIN = 1.05
+#: candidate pairs: within this factor of the contact distance when chosen. A speed setting:
+#: while no particle is pushed more than half the margin within a sweep (a model's frames:
+#: pushes ~1e-4 d), no pair outside it can touch and the result is the same bit for bit at any
+#: margin (the shipped models' 2000-frame rollouts: identical at 1.01 and 1.05); 1.01
+#: against 1.05: 22 % fewer candidates, 8 % less correction time at 2000 particles
+CANDIDATE_MARGIN = 1.01
 #: overlaps left by the correction, as a fraction of the contact distance (the built-in DEM's
 #: own reach ~1e-5-1e-4 d)
 CORRECTION_TOLERANCE = 1e-4

@@ -109,6 +109,38 @@ def test_contact_correction_pushes_overlapping_pairs_apart():
     assert 0 < corr.rms_push < 0.1
 
 
+def test_the_candidate_margin_changes_the_correction_only_where_pushes_exceed_it(monkeypatch):
+    """The candidate margin is a speed setting: where no particle is pushed more than half of
+    it within a sweep (the model's frames: pushes of ~1e-4 d), a pair outside it cannot touch
+    before it is chosen, so the corrected positions are the same bit for bit at any margin;
+    where pushes exceed it, candidates are chosen again between sweeps and the result is
+    another correction to the same tolerance."""
+    from gripdem.boundary import Box, brute_force_pairs
+    from gripdem.inference import contacts
+
+    grid = np.stack(np.meshgrid(*(np.arange(k) for k in (8, 7, 9)), indexing="ij"), -1)
+
+    def corrected(spacing, jitter, margin):
+        box = Box(8 * spacing, 7 * spacing, 9 * spacing)
+        q = (grid.reshape(-1, 3) + 0.5) * spacing - 0.5 * box.lengths
+        q = q + np.random.default_rng(5).normal(0.0, jitter, q.shape)
+        monkeypatch.setattr(contacts, "CANDIDATE_MARGIN", margin)
+        nl = NeighbourList(box, 1.0, 0.3, image_velocity=0.0)
+        nl.build(q, 0.0, 0.0)
+        corr = push_apart(nl, 0.0, 1.0, sweeps=500, tolerance=1e-6)
+        assert corr.overlapping_before > 50 and corr.overlapping_after == 0
+        _, _, vec = brute_force_pairs(nl.q, box, 0.0, 1.0)
+        assert np.linalg.norm(vec, axis=1).min() >= 1.0 - 1e-6 * (1 + 1e-9)
+        return nl.q, np.abs(corr.moves).max()
+
+    small = {m: corrected(1.0005, 0.0005, m) for m in (1.01, 1.05, 1.2)}
+    assert max(move for _, move in small.values()) < 0.5 * 0.01
+    for margin, (positions, _) in small.items():
+        np.testing.assert_array_equal(positions, small[1.05][0], err_msg=f"margin {margin}")
+    large = {m: corrected(1.05, 0.05, m) for m in (1.001, 1.05)}  # both corrected (asserted)
+    assert not np.array_equal(large[1.001][0], large[1.05][0])
+
+
 @pytest.mark.parametrize("tolerance", [1e-4, 1e-3])
 def test_a_looser_correction_tolerance_leaves_only_overlaps_below_it(tolerance):
     """The same jittered lattice: no pair closer than the contact distance by more than the

@@ -4,6 +4,9 @@
   every script prints beside its tables (timings on a shared machine mean little without it);
 - :func:`set_threads`: torch intra-op threads (numba kernels of the DEM run on one thread);
 - :func:`markdown_table`;
+- :func:`result_header` and :func:`write_report`: every result file starts with the header that
+  one function writes (date, commit, CPU model and threads, the command with paths relative to
+  the repository), and is written whole or not at all (a temporary file, then a rename);
 - :class:`PeakMemory`: peak resident memory of a block of code above its starting level,
   sampled from ``/proc/self/statm`` in a thread (torch's CPU allocator has no statistics);
 - :func:`scene_dataset`: the built-in dataset of a scene and preset (from the cache; generated
@@ -94,13 +97,78 @@ def markdown_table(headers: list[str], rows: list[list]) -> str:
     return "\n".join(out)
 
 
+REPO = Path(__file__).resolve().parents[2]
+#: the first characters of every result file's header line (tests and the docs check for it)
+HEADER_MARK = "> Measured "
+
+
+def _relative(argument: str) -> str:
+    """A command-line argument with paths inside the repository made relative to it and the
+    home folder written ``~`` (a result file names no machine's folders)."""
+    for prefix, short in ((str(REPO) + "/", ""), (str(Path.home()) + "/", "~/")):
+        argument = argument.replace(prefix, short)
+    return argument
+
+
+def _git(*args: str) -> str:
+    import subprocess
+
+    try:
+        out = subprocess.run(
+            ["git", *args], cwd=REPO, capture_output=True, text=True, timeout=10, check=True
+        )
+        return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def result_fields(argv: list[str] | None = None) -> dict:
+    """What a result file's header says: date (UTC), commit (``+`` where the tree had
+    uncommitted changes to tracked files), CPU model, CPUs, torch threads, the command."""
+    import datetime
+    import shlex
+
+    argv = sys.argv if argv is None else argv
+    commit = _git("rev-parse", "--short", "HEAD") or "unknown"
+    if _git("status", "--porcelain", "--untracked-files=no"):
+        commit += "+"
+    script = _relative(str(Path(argv[0]).resolve())) if argv else ""
+    return {
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
+        "commit": commit,
+        "cpu": cpu_model(),
+        "cpus": available_cpus(),
+        "torch_threads": torch.get_num_threads(),
+        "command": shlex.join(["python", script, *map(_relative, argv[1:])]),
+    }
+
+
+def result_header(fields: dict | None = None) -> str:
+    """The one header line of a Markdown result file (from :func:`result_fields`)."""
+    f = fields or result_fields()
+    return (
+        f"{HEADER_MARK}{f['date']} at commit {f['commit']} on {f['cpu']} ({f['cpus']} CPUs, "
+        f"torch {f['torch_threads']} thread(s)) by `{f['command']}`"
+    )
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
 def write_report(stem: str | Path, text: str, data) -> None:
-    """``STEM.md`` (the printed report) and ``STEM.json`` (its data), then print the report."""
+    """``STEM.md`` (the header line, then the printed report) and ``STEM.json`` (its data under
+    ``results``, the header's fields under ``header``), each written whole; then print the
+    report."""
     import json
 
     stem = Path(stem)
-    stem.with_suffix(".md").write_text(text)
-    stem.with_suffix(".json").write_text(json.dumps(data, indent=1, default=str))
+    fields = result_fields()
+    _atomic_write(stem.with_suffix(".md"), f"{result_header(fields)}\n\n{text.rstrip()}\n")
+    payload = {"header": fields, "results": data}
+    _atomic_write(stem.with_suffix(".json"), json.dumps(payload, indent=1, default=str))
     print(text)
 
 

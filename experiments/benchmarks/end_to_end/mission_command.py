@@ -25,7 +25,6 @@ the report says so). Writes ``mission_command.md`` / ``.json`` into ``--out``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import subprocess
@@ -35,7 +34,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import machine_line, markdown_table  # noqa: E402
+from benchlib import machine_line, markdown_table, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[3]
 COMMAND = ["-m", "split=190-10,100-100", "model=vct"]
@@ -117,7 +116,7 @@ def main(argv=None) -> int:
     lines = [
         f"# `python -m gripdem.run {' '.join(COMMAND)}`",
         "",
-        f"{datetime.date.today()}, commit {commit} ({args.repo}), "
+        f"the sweep at commit {commit}, "
         f"{'fresh data (DEM included)' if args.fresh_data else 'cached data'}"
         + (f", extra overrides: {' '.join(args.extra)}" if args.extra else ""),
         "",
@@ -144,11 +143,7 @@ def main(argv=None) -> int:
     ]
     text = "\n".join(lines)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{args.name}.md").write_text(text)
-    (args.out / f"{args.name}.json").write_text(
-        json.dumps({"commit": commit, "machine": machine_line(), "results": results}, indent=1)
-    )
-    print(text)
+    write_report(args.out / args.name, text, {"commit": commit, "runs": results})
     return 0
 
 

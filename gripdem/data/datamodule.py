@@ -42,7 +42,7 @@ from gripdem.data.protocols import (
 )
 from gripdem.data.resumable import ResumableLoader
 from gripdem.data.schema import DatasetError, DatasetMeta
-from gripdem.data.windows import Split
+from gripdem.data.windows import Split, resolve_rollout_links
 
 __all__ = ["TrajectoryDataModule", "WindowBatch", "WindowDataset", "collate_windows"]
 
@@ -69,6 +69,10 @@ class TrajectoryDataModule(L.LightningDataModule):
     ``model_horizon`` (``model.horizon``): a model that predicts fewer frames than the split's
     horizon trains and validates on windows of its own horizon; the test windows keep the
     split's, and the runner chains the model over them (:mod:`gripdem.runner.chained_evaluation`).
+    ``rollout_links`` (``model.rollout.links``): training and validation windows of that many of
+    the model's links (rollout training, :mod:`gripdem.inference.rollout_training`; ``auto`` and
+    what is allowed: :func:`gripdem.data.windows.resolve_rollout_links`); the resolved number is
+    :attr:`rollout_links`.
     ``seed`` (the run's seed; None: ``torch.initial_seed()``) orders the training windows: one
     permutation per ``(seed, epoch)``, resumable mid-epoch (:mod:`gripdem.data.resumable`).
     """
@@ -92,6 +96,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         graph_cache_mb: float = 256.0,
         memory_mb: float = 2048.0,
         model_horizon: int | None = None,
+        rollout_links: int | str = 1,
         batch_size: int = 1,
         num_workers: int = 0,
         pin_memory: bool = False,
@@ -135,6 +140,10 @@ class TrajectoryDataModule(L.LightningDataModule):
             self.split.horizon
             if model_horizon is None
             else min(int(model_horizon), self.split.horizon)
+        )
+        #: links of the model per training and validation window (1: windows of one link)
+        self.rollout_links = resolve_rollout_links(
+            rollout_links, self.split.horizon, self.model_horizon
         )
         self.batch_size = int(batch_size)
         self.num_workers = int(num_workers)
@@ -184,8 +193,9 @@ class TrajectoryDataModule(L.LightningDataModule):
         self.meta = meta
         self.plan = plan_windows(meta.n_sims, meta.n_frames, self.split, **self.plan_args)
         if self.model_horizon < self.split.horizon:
-            # train and validate on the model's own horizon; test on the split's (chained)
-            short = Split(self.split.history, self.model_horizon)
+            # train and validate on windows of the model's own horizon times the links chained
+            # in training; test on the split's (chained)
+            short = Split(self.split.history, self.model_horizon * self.rollout_links)
             own = plan_windows(meta.n_sims, meta.n_frames, short, **self.plan_args)
             self.plan = replace(self.plan, train=own.train, val=own.val)
         self.encoding = make_encoding(self.encoding_name, meta.boundary)

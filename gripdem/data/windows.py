@@ -185,3 +185,56 @@ class WindowIndex(Sequence):
 # --------------------------------------------------------------------------------------------
 # protocols
 # --------------------------------------------------------------------------------------------
+
+
+# --------------------------------------------------------------------------------------------
+# rollout training: windows of several links
+# --------------------------------------------------------------------------------------------
+#: ``model.rollout.links=auto``: links per training window, at most this many (the smallest
+#: number of the split's links that is at least 2 and divides them; 1 where the split's horizon
+#: is one link). Chosen by measurement: docs/explanation/models.md#rollout-training
+AUTO_ROLLOUT_LINKS = 2
+
+
+def resolve_rollout_links(links: int | str, split_horizon: int, link: int) -> int:
+    """The links a training window chains (``model.rollout.links``): ``auto`` or a whole number
+    ``L >= 1``. A model whose link (``model.horizon``) is shorter than the split's horizon is
+    tested by chaining ``split_horizon / link`` links with the contact correction between
+    them; rollout training chains ``L`` of them per training window, so a window spans
+    ``K + 1 + L * link`` frames. ``L`` must divide the split's links; ``L > 1`` needs a split
+    whose horizon is longer than one link. ``auto``: the smallest divisor of the split's links
+    that is at least :data:`AUTO_ROLLOUT_LINKS` (1 when the split is one link).
+
+    Raises :class:`~gripdem.errors.SplitError` naming ``model.rollout.links`` and what is
+    allowed."""
+    link = int(link)
+    split_links, rest = divmod(int(split_horizon), link)
+    if isinstance(links, str) and links.strip().lower() == "auto":
+        if split_links <= 1 or rest:
+            return 1
+        return min(n for n in range(AUTO_ROLLOUT_LINKS, split_links + 1) if split_links % n == 0)
+    if isinstance(links, bool) or not isinstance(links, int) or links < 1:
+        raise SplitError(
+            f"model.rollout.links must be 'auto' or a whole number >= 1, got {links!r}"
+        )
+    if links == 1:
+        return 1
+    if split_links <= 1:
+        raise SplitError(
+            f"model.rollout.links={links}: the split's horizon ({split_horizon} frames) is not "
+            f"longer than the model's link (model.horizon={link}), so there is nothing to "
+            "chain; use model.rollout.links=1 or auto, or a longer split (e.g. split=100-100)"
+        )
+    allowed = [n for n in range(1, split_links + 1) if split_links % n == 0 and not rest]
+    if rest or split_links % links:
+        raise SplitError(
+            f"model.rollout.links={links} does not divide the split's {split_horizon} frames "
+            f"into links of model.horizon={link}: allowed "
+            + (
+                ", ".join(map(str, allowed))
+                if allowed
+                else "1 (the horizon is not a multiple of the link)"
+            )
+            + " or auto"
+        )
+    return links

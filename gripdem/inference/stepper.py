@@ -219,23 +219,42 @@ class Stepper:
         for sim, nl in enumerate(self.lists):
             i, j, vec = nl.pairs(self.times[sim, -1], self.cutoff)
             graphs.append(graph_from_pairs(i, j, vec, n, length_unit=self.d))
-        return inference_batch(inputs, positions, times, offsets, graphs), offsets
+        return inference_batch(inputs, positions, times, offsets, graphs)
+
+    def link_batch(self):
+        """The next link's input batch from the state, on the model's device (what the model
+        reads to predict the link; no targets). Rollout training computes the model's output
+        on it with gradient and hands it back through :meth:`take_link`."""
+        started = time.perf_counter()
+        batch = self._batch()
+        self.seconds["features"] += time.perf_counter() - started
+        return batch.to(self.device)
 
     @torch.no_grad()
-    def _predict(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One link: predicted wrapped frames ``(S, f, N, 3)``, their times and offsets."""
+    def take_link(self, batch, outputs: torch.Tensor) -> None:
+        """Make the model's ``outputs`` for :meth:`link_batch`'s ``batch`` the next link: the
+        following :meth:`advance` keeps its frames (corrected) instead of predicting one."""
+        if self._pending is not None and self._pending[3] < self.link:
+            raise RuntimeError(
+                f"take_link: {self.link - self._pending[3]} frames of the current link are not "
+                "kept yet (advance first)"
+            )
         started = time.perf_counter()
-        batch, offsets = self._batch()
-        self.seconds["features"] += time.perf_counter() - started
-        started = time.perf_counter()
-        batch = batch.to(self.device)
-        out = self.model(batch)
-        self.seconds["forward"] += time.perf_counter() - started
-        started = time.perf_counter()
-        predicted = self.model.decode(out, batch).cpu().numpy()
+        predicted = self.model.decode(outputs.detach(), batch).cpu().numpy()
         self.seconds["decode_wrap"] += time.perf_counter() - started
         future_times = batch.times[:, self.k + 1 :].cpu().numpy()
-        return predicted, future_times, offsets[:, self.k + 1 :]
+        future_offsets = batch.offsets[:, self.k + 1 :].cpu().numpy()
+        self._pending = [predicted, future_times, future_offsets, 0, np.zeros_like(predicted[:, 0])]
+
+    @torch.no_grad()
+    def _predict(self) -> None:
+        """One link predicted from the state (:meth:`link_batch`, the forward pass,
+        :meth:`take_link`)."""
+        batch = self.link_batch()
+        started = time.perf_counter()
+        out = self.model(batch)
+        self.seconds["forward"] += time.perf_counter() - started
+        self.take_link(batch, out)
 
     # ---- frames ---------------------------------------------------------------------------
     def _accept(
@@ -317,8 +336,7 @@ class Stepper:
         out = []
         while len(out) < count and self.stopped is None:
             if self._pending is None or self._pending[3] >= self.link:
-                predicted, times, offsets = self._predict()
-                self._pending = [predicted, times, offsets, 0, np.zeros_like(predicted[:, 0])]
+                self._predict()
             predicted, times, offsets, j, carry = self._pending
             moved = predicted[:, j] + carry
             if not np.isfinite(moved).all():

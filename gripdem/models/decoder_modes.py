@@ -214,6 +214,13 @@ def exact_loss(mode: str, deviation: torch.Tensor, true_deviation: torch.Tensor)
     return torch.mean((deviation - true_deviation) ** 2) / cv.clamp_min(1e-12)
 
 
+def exact_cv_loss(mode: str, true_deviation: torch.Tensor) -> torch.Tensor:
+    """CV's loss on the window, :func:`exact_loss`'s normaliser (a detached scalar)."""
+    if mode != "vct":
+        true_deviation = torch.cumsum(true_deviation, dim=2)
+    return torch.mean(true_deviation**2).detach()
+
+
 def exact_crps_loss(
     mode: str,
     members: torch.Tensor,

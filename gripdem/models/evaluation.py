@@ -56,6 +56,10 @@ class RolloutEvaluation:
 
     def _evaluate(self, batch, stage: str) -> None:
         members = None
+        if batch.horizon > self.hparams.horizon:  # windows of several links: chained
+            positions = self.chain(batch).positions(self, batch).to(batch.times.device)
+            self.record(batch, positions, math.nan, stage)
+            return
         if self.is_ensemble:
             outputs = self.forward_members(batch, self.hparams.eval_members)
             pred = outputs.mean(dim=0)  # decode is affine: the mean of the members' positions

@@ -32,7 +32,7 @@ from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
 from gripdem.models.ensemble import EnsembleMembers, check_rollout_options
 from gripdem.models.evaluation import RolloutEvaluation
-from gripdem.models.training import TrainingSteps
+from gripdem.models.training import TrainingSteps, check_rollout_training
 from gripdem.nn.contact import ContactEncoder, ContactGraph
 from gripdem.nn.direct import DirectDecoder
 from gripdem.nn.graph_conv import EdgeGraph, GraphConvEncoder
@@ -125,6 +125,8 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             cannot drift as a whole.
         history_noise: exact frame: random-walk noise on the observed frames during training,
             final std in diameters (:mod:`gripdem.models.history_noise`; 0: off).
+        contact_loss: exact frame: weight of the predicted frames' neighbour-pair overlaps in
+            the loss (:mod:`gripdem.models.contact_loss`; 0: off).
         n_particles: needed only by ``trainable_graph=dense``.
         graph_cutoff: the graph's cut-off in diameters (scales the edge features).
         profile: mean-flow baseline profile (``cosine`` | ``linear``; default by boundary).
@@ -138,6 +140,15 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         contact_capture, noise_scale: rollouts only: pairs closer than this gap (contact
             distances) are pulled into contact (0: off; :mod:`gripdem.inference.contacts`); the
             members' latent noise is scaled by this (inflation; 1: as trained).
+        rollout_links, rollout_loss, rollout_target: rollout training
+            (:mod:`gripdem.inference.rollout_training`): the links chained per training window
+            (the DataModule's windows span them; 1: one link from the true history), which
+            links' losses count (``last`` | ``all``), what a later link is asked to reach
+            (``steps``: the true motion from where the rollout stands | ``truth``) and the
+            fraction of the budget trained on each window's first link before the links are
+            chained (``rollout_start``).
+            Windows longer than one link are trained and validated through the link chain that
+            :func:`gripdem.inference.rollout_training.attach` gives the model.
     """
 
     def __init__(
@@ -175,6 +186,11 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
         pair_crps: float = 0.0,
         contact_capture: float = 0.0,
         noise_scale: float = 1.0,
+        rollout_links: int = 1,
+        rollout_loss: str = "all",
+        rollout_target: str = "steps",
+        rollout_start: float = 0.0,
+        contact_loss: float = 0.0,
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)
@@ -219,11 +235,22 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             raise ValueError(
                 "model.history_noise > 0 needs the exact frame (model.encoding=unwrapped)"
             )
+        if contact_loss < 0 or (contact_loss > 0 and (not self.exact or loss != "mse")):
+            raise ValueError(
+                "model.contact_loss is a weight >= 0 of the predicted frames' pair overlaps in "
+                f"the exact frame's MSE loss (model.encoding=unwrapped, model.loss=mse), got "
+                f"{contact_loss} with model.loss={loss}, encoding {encoding!r}"
+            )
         if zero_mean and not self.exact:
             raise ValueError(
                 "model.zero_mean=true needs the exact frame (model.encoding=unwrapped)"
             )
         self._check_ensemble(loss, members, eval_members, loss_weighting)
+        check_rollout_training(
+            rollout_links, rollout_loss, rollout_target, rollout_start, loss, self.exact
+        )
+        #: set by gripdem.inference.rollout_training.attach (windows of several links)
+        self.link_chain = None
         self._eval_store: dict[str, list] = {}
         self.accuracy_curve: list[tuple[float, int, float]] = []
         self._fit_started: float | None = None

@@ -12,12 +12,60 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import torch
 from lightning.pytorch.callbacks import Timer
 
 from gripdem.models import decoder_modes as modes
+from gripdem.models.contact_loss import contact_term
 from gripdem.models.history_noise import noisy_history
+
+#: ``model.rollout.loss`` (gripdem.inference.rollout_training): which links' losses count
+ROLLOUT_LOSSES = ("last", "all")
+#: ``model.rollout.target``: what a later link is asked to reach
+ROLLOUT_TARGETS = ("steps", "truth")
+
+
+def check_rollout_training(
+    links: int, rollout_loss: str, rollout_target: str, start: float, loss: str, exact: bool
+) -> None:
+    """Refuse rollout-training options that cannot work, naming the option."""
+    if not 0.0 <= float(start) < 1.0:
+        raise ValueError(
+            f"model.rollout.start is the fraction of the training budget trained on one link "
+            f"before the links are chained, in [0, 1), got {start!r}"
+        )
+    if isinstance(links, bool) or not isinstance(links, int) or links < 1:
+        raise ValueError(f"model.rollout.links must be a whole number >= 1, got {links!r}")
+    if rollout_loss not in ROLLOUT_LOSSES:
+        raise ValueError(
+            f"model.rollout.loss must be one of {ROLLOUT_LOSSES}, got {rollout_loss!r}"
+        )
+    if rollout_target not in ROLLOUT_TARGETS:
+        raise ValueError(
+            f"model.rollout.target must be one of {ROLLOUT_TARGETS}, got {rollout_target!r}"
+        )
+    if links > 1 and (loss != "mse" or not exact):
+        raise ValueError(
+            f"model.rollout.links={links} trains point forecasts in the exact frame "
+            f"(model.loss=mse, model.encoding=unwrapped), got model.loss={loss}"
+            + ("" if exact else " in the paper's wrapped frame")
+            + ": use model.rollout.links=1"
+        )
+
+
+def first_link(batch, link: int):
+    """``batch`` cut to its first ``link`` target frames (windows of one link, as without
+    rollout training)."""
+    frames = batch.history_len + 1 + link
+    return replace(
+        batch,
+        target_deltas=None if batch.target_deltas is None else batch.target_deltas[:, :, :link],
+        target_positions=batch.target_positions[:, :, :link],
+        times=batch.times[:, :frames],
+        offsets=batch.offsets[:, :frames],
+    )
 
 
 class TrainingSteps:
@@ -45,7 +93,18 @@ class TrainingSteps:
         if pred.ndim == 5:  # an ensemble scored on squared error: its mean
             pred = pred.mean(dim=0)
         if self.exact:
-            return modes.exact_loss(mode, pred, self.true_deviation(batch))
+            true = self.true_deviation(batch)
+            loss = modes.exact_loss(mode, pred, true)
+            weight = float(self.hparams.get("contact_loss", 0.0))
+            if weight > 0:
+                positions = self.decode(pred, batch)
+                unit = self.change_std.mean()
+                cv = modes.exact_cv_loss(mode, true)
+                pairs, offsets = batch.edge_index, batch.target_offsets
+                loss = loss + weight * contact_term(
+                    positions, pairs, offsets, self.boundary, self.diameter, unit, cv
+                )
+            return loss
         pred, true = modes.loss_terms(mode, self.hparams.vct_shift, pred, batch.target_deltas)
         return torch.mean((pred - true) ** 2)
 
@@ -55,11 +114,39 @@ class TrainingSteps:
     def on_train_start(self) -> None:
         self._fit_started = time.perf_counter()
 
+    def chain(self, batch):
+        """The link chain that rollout training and chained validation run ``batch``'s windows
+        of several links through (:mod:`gripdem.inference.rollout_training`)."""
+        if self.link_chain is None:
+            raise RuntimeError(
+                f"windows of {batch.horizon} frames are {batch.horizon // self.hparams.horizon} "
+                f"links of model.horizon={self.hparams.horizon}: rollout training needs the link "
+                "chain (gripdem.inference.rollout_training.attach(model); the runner attaches it)"
+            )
+        return self.link_chain
+
+    def rollout_started(self) -> bool:
+        """Whether the training budget has reached ``model.rollout.start`` (the fraction trained
+        on the first link of each window only); True outside a trainer with a step budget."""
+        start = float(self.hparams.get("rollout_start", 0.0))
+        trainer = self._trainer
+        if start <= 0 or trainer is None:
+            return True
+        total = trainer.estimated_stepping_batches
+        if not math.isfinite(total) or total <= 0:
+            return True
+        return self.global_step >= start * total
+
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
         sigma = float(self.hparams.history_noise)
         if sigma > 0:
             batch = noisy_history(batch, sigma, self.diameter, self.boundary, self.normalizer)
-        if self.hparams.loss == "crps":
+        if batch.horizon > self.hparams.horizon and self.rollout_started():
+            loss = self.chain(batch).loss(self, batch)  # rollout training: the links chained
+        elif batch.horizon > self.hparams.horizon:  # before model.rollout.start: link 1 only
+            first = first_link(batch, int(self.hparams.horizon))
+            loss = self._loss(self(first), first)
+        elif self.hparams.loss == "crps":
             loss = self._loss(self.forward_members(batch, self.hparams.members), batch)
         else:
             loss = self._loss(self(batch), batch)

@@ -16,7 +16,8 @@ from typing import Any
 
 import torch
 
-from gripdem.inference.stepper import Stepper, StepperSettings
+from gripdem.inference.rollout_training import chained_positions
+from gripdem.inference.stepper import StepperSettings
 
 
 @torch.no_grad()
@@ -26,12 +27,7 @@ def evaluate_chained(model, dm, settings=None) -> dict[str, Any]:
     model = model.eval()
     settings = settings or StepperSettings()
     for batch in dm.test_dataloader():
-        observed = batch.input_positions.transpose(1, 2).numpy()  # (B, K+1, N, 3)
-        stepper = Stepper(model, observed, batch.input_times.numpy(), settings)
-        predicted = stepper.advance(batch.horizon)
-        if stepper.stopped is not None:
-            raise FloatingPointError(f"chained test: {stepper.stopped}")
-        model.record(batch, torch.from_numpy(predicted), math.nan, "test")
+        model.record(batch, chained_positions(model, batch, settings), math.nan, "test")
     results = model.results("test")
     results["chained"] = {"model_horizon": int(model.hparams.horizon), **settings.to_dict()}
     return results

@@ -72,6 +72,16 @@ class LrSchedule(Enum):
     cosine = "cosine"
 
 
+class RolloutLoss(Enum):
+    last = "last"
+    all = "all"
+
+
+class RolloutTarget(Enum):
+    steps = "steps"
+    truth = "truth"
+
+
 class EncodingName(Enum):
     sincos = "sincos"
     vct = "vct"
@@ -120,6 +130,18 @@ class EncoderSchema:
 
 
 @dataclass
+class RolloutSchema:
+    """Rollout training (gripdem.inference.rollout_training): links chained per training window
+    (``auto`` or a whole number, gripdem.data.windows.resolve_rollout_links), which links'
+    losses count and what a later link is asked to reach."""
+
+    links: Any = 1
+    loss: RolloutLoss = RolloutLoss.all
+    target: RolloutTarget = RolloutTarget.steps
+    start: float = 0.5
+
+
+@dataclass
 class ModelSchema:
     encoder: EncoderSchema = field(default_factory=EncoderSchema)
     name: str = MISSING
@@ -152,6 +174,8 @@ class ModelSchema:
     pair_crps: float = 0.0
     contact_capture: float = 0.0
     noise_scale: float = 1.0
+    rollout: RolloutSchema = field(default_factory=RolloutSchema)
+    contact_loss: float = 0.0
     monitor: str = "val/rmse"
 
 
@@ -184,6 +208,7 @@ class DataSchema:
     graph_cache_mb: float = 256.0
     memory_mb: float = 2048.0
     model_horizon: Optional[int] = None
+    rollout_links: Any = 1
     batch_size: int = 1
     num_workers: int = 0
     pin_memory: bool = False
@@ -326,10 +351,29 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
             "as in-sample"
         )
     _check_split_fits_the_preset(cfg)
+    _check_rollout_training(cfg, exact)
     _check_logger_options(cfg.get("logger") or {})
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
+
+
+def _check_rollout_training(cfg: DictConfig, exact: bool) -> None:
+    """``model.rollout``: a number of links the split's horizon holds (one line naming the
+    option and what is allowed, before any data is read), on a point forecast in the exact
+    frame."""
+    from gripdem.data.windows import Split, resolve_rollout_links
+
+    split = Split(int(cfg.split.history), int(cfg.split.horizon))
+    link = cfg.data.get("model_horizon")
+    link = split.horizon if link is None else min(int(link), split.horizon)
+    links = resolve_rollout_links(cfg.model.rollout.links, split.horizon, link)
+    if links > 1 and (cfg.model.loss != "mse" or not exact):
+        raise ValueError(
+            f"model.rollout.links={links} trains point forecasts in the exact frame "
+            f"(model.loss=mse, model.encoding=unwrapped), got model.loss={cfg.model.loss}, "
+            f"model.encoding={cfg.model.encoding.value}: use model.rollout.links=1"
+        )
 
 
 def _check_logger_options(options) -> None:

@@ -38,6 +38,7 @@ from gripdem.inference.checkpoint import (
     load_checkpoint_model,
     load_model,
 )
+from gripdem.inference.rollout_training import attach
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
 from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
@@ -105,9 +106,11 @@ def accelerator(cfg: DictConfig) -> str:
 
 
 def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
+    """The configured model for ``dm``'s data, with the link chain of rollout training
+    (:mod:`gripdem.inference.rollout_training`)."""
     meta = dm.meta
     model_cfg = plain(cfg.model)
-    return TrajectoryModule(
+    model = TrajectoryModule(
         scene=data_scene(meta),
         normalizer=dm.normalizer.to_dict(),
         encoding=model_cfg["encoding"],
@@ -137,10 +140,16 @@ def build_model(cfg: DictConfig, dm: TrajectoryDataModule) -> TrajectoryModule:
         pair_crps=model_cfg["pair_crps"],
         contact_capture=model_cfg["contact_capture"],
         noise_scale=model_cfg["noise_scale"],
+        rollout_links=dm.rollout_links,
+        rollout_loss=model_cfg["rollout"]["loss"],
+        rollout_target=model_cfg["rollout"]["target"],
+        rollout_start=model_cfg["rollout"]["start"],
+        contact_loss=model_cfg["contact_loss"],
         n_particles=meta.n_particles,
         graph_cutoff=float(cfg.data.graph_cutoff),
         linear_ar=fit_linear_ar(cfg, dm).to_dict(),
     )
+    return attach(model)
 
 
 def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
@@ -170,6 +179,12 @@ def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
         "lr": float(model["lr"]),
         "lr_schedule": model["lr_schedule"],
         "input_noise": float(model["input_noise"]),
+        "history_noise": float(model["history_noise"]),
+        "rollout_links": int(dm.rollout_links),
+        "rollout_loss": model["rollout"]["loss"],
+        "rollout_target": model["rollout"]["target"],
+        "rollout_start": float(model["rollout"]["start"]),
+        "contact_loss": float(model["contact_loss"]),
         "ar_prior": bool(model["ar_prior"]),
         "graph_cutoff_d": float(cfg.data.graph_cutoff),
         "seed": int(cfg.seed),

@@ -28,6 +28,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
+from gripdem.data.windows import resolve_rollout_links
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import report_error
 
@@ -42,6 +43,12 @@ SECONDS_PER_STEP = {
     ("contact", "gru"): (0.046, 0.0066),
     ("graph_conv", "gru"): (0.33, 0.0066),
 }
+#: rollout training (model.rollout.links = L): a chained training step (after
+#: model.rollout.start of the budget) costs ``1 + c (L - 1)`` one-link steps, ``c`` by
+#: model.rollout.loss (each further link: a forward pass, the contact correction
+#: of its frames and, for ``all``, a backward pass; chained validation included), measured with
+#: two one-thread jobs side by side (experiments/results/rollout_training.md)
+ROLLOUT_LINK_COST = {"last": 0.65, "all": 1.1}
 #: seconds per job besides training at 2000 particles: loading, the AR fit, validation, the
 #: test and the outputs (per frame of the split's horizon: the chained test grows with it)
 SECONDS_PER_JOB = (14.0, 0.02)
@@ -69,6 +76,11 @@ def job_seconds(cfg: DictConfig) -> float:
     history = cfg.data.history_len or cfg.split.history
     scale = float(cfg.preset.get("particles", 2000)) / 2000.0
     per_step = (base + per_frame * model_horizon) * scale * max(1.0, history / 10.0)
+    rollout = model.get("rollout") or {}
+    links = resolve_rollout_links(rollout.get("links", 1), horizon, model_horizon)
+    chained = 1.0 + ROLLOUT_LINK_COST[_value(rollout.get("loss", "last"))] * (links - 1)
+    start = float(rollout.get("start", 0.0)) if links > 1 else 1.0  # one link until then
+    per_step *= start + (1.0 - start) * chained
     steps = cfg.trainer.get("max_steps", -1)
     if steps is None or int(steps) < 0:  # an epoch budget: the preset's windows per epoch
         steps = 400 * int(cfg.trainer.get("max_epochs", 1) or 1)

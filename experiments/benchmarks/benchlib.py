@@ -159,15 +159,18 @@ def _atomic_write(path: Path, text: str) -> None:
 
 
 def write_report(stem: str | Path, text: str, data) -> None:
-    """``STEM.md`` (the header line, then the printed report) and ``STEM.json`` (its data under
-    ``results``, the header's fields under ``header``), each written whole; then print the
-    report."""
+    """``STEM.md`` (the header line, then the printed report) and ``STEM.json`` (the header's
+    fields under ``header`` beside the keys of ``data``, a mapping; other data under
+    ``results``), each written whole; then print the report."""
     import json
 
     stem = Path(stem)
     fields = result_fields()
     _atomic_write(stem.with_suffix(".md"), f"{result_header(fields)}\n\n{text.rstrip()}\n")
-    payload = {"header": fields, "results": data}
+    if isinstance(data, dict):
+        payload = {"header": fields, **data}
+    else:
+        payload = {"header": fields, "results": data}
     _atomic_write(stem.with_suffix(".json"), json.dumps(payload, indent=1, default=str))
     print(text)
 

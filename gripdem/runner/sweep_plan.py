@@ -145,19 +145,21 @@ class SweepPlan(Callback):
             )
             return
         loader = GlobalHydra.instance().config_loader()
-        total, missing = 0.0, {}
+        total, longest, missing = 0.0, 0.0, {}
         for overrides in jobs:
             job = loader.load_sweep_config(config, list(overrides))
             try:
                 check_combination(job, notes=False)
             except ValueError as exc:
                 raise ValueError(f"job {' '.join(overrides) or '(no overrides)'}: {exc}") from exc
-            total += job_seconds(job)
+            seconds = job_seconds(job)
+            total, longest = total + seconds, max(longest, seconds)
             if job.data.path is None:
                 missing.update(_missing_dataset(job))
         n = len(jobs)
         at_once = _jobs_at_once(config, n)
-        wall = total / at_once * (PARALLEL_SLOWDOWN if at_once > 1 else 1.0)
+        # side by side the sweep lasts at least as long as its longest job
+        wall = max(total / at_once, longest) * (PARALLEL_SLOWDOWN if at_once > 1 else 1.0)
         how = "one after another" if at_once == 1 else f"{at_once} at a time"
         dem = ""
         if missing:

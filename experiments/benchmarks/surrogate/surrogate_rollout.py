@@ -37,7 +37,6 @@ deterministic surrogate, rolled out in the same run on the same truth, with the 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -48,7 +47,14 @@ import numpy as np
 import torch
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import load_yaml, machine_line, scene_dataset, set_threads, train_run  # noqa: E402
+from benchlib import (  # noqa: E402
+    load_yaml,
+    machine_line,
+    scene_dataset,
+    set_threads,
+    train_run,
+    write_report,
+)
 from surrogate_handback import dem_seconds_per_frame, generator_config, handback_ratios  # noqa: E402
 from surrogate_options import add_correction_options, rollout_options, stepper_settings  # noqa: E402
 from surrogate_tables import summary_tables  # noqa: E402
@@ -346,8 +352,7 @@ def main(argv: list[str] | None = None) -> dict:
     }
     args.out_dir.mkdir(parents=True, exist_ok=True)
     markdown = summary_tables(report)
-    (args.out_dir / f"{args.name}.md").write_text(markdown)
-    (args.out_dir / f"{args.name}.json").write_text(json.dumps(report, indent=1, default=float))
+    write_report(args.out_dir / args.name, markdown, report)
     for scene, data in report["scenes"].items():
         run_name = Path(data["checkpoint"]).parent.parent.name or data["checkpoint"]
         title = f"{scene}: {data['frames']} frames out of sample ({run_name})"
@@ -355,7 +360,6 @@ def main(argv: list[str] | None = None) -> dict:
             title += f", member 0 of {data['members']}"
         stem = scene.replace(" (reference)", "_reference")
         save_figure(plot_surrogate(data, title), args.out_dir / f"{args.name}_{stem}.png")
-    print(markdown)
     return report
 
 

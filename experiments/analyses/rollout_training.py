@@ -124,7 +124,10 @@ def measure(run: Path, windows: int) -> dict:
     physics = "test/physics/{}/{}"
     # runs made before an option existed: its default
     before = {"rollout_links": 1, "rollout_start": 0.0, "contact_loss": 0.0, "history_noise": 0.0}
+    before["rollout_target"] = "truth"  # the only target before the option existed
     row = {key: hp.get(key, before.get(key, "–")) for key in ROW_KEYS}
+    if row["rollout_links"] == 1:  # one link: nothing is chained in training
+        row.update(rollout_loss="–", rollout_target="–", rollout_start="–")
     row["budget"] = metrics["steps"]
     row.update(
         run=run.name,
@@ -196,7 +199,10 @@ def main() -> None:
         "chained with the contact correction), training speed, the last frame's physics over "
         "the truth's, and the raw frames before any correction (one link from "
         f"{args.windows} starts of the test simulations) beside the truth's; mean ± std over "
-        "seeds, each seed in brackets.\n\n" + table
+        "seeds, each seed in brackets. The validation RMSE is on each run's own validation "
+        "windows (as many links as it trains): compare it only between rows of the same links. "
+        "Steps per second: each run's own, two runs side by side on the machine of the header "
+        "(shared with other work at times: read them as rough).\n\n" + table
     )
     if args.out:
         write_report(args.out, text, rows)

@@ -115,7 +115,7 @@ def planned_split(card: dict) -> dict:
 def encoder_text(encoder: dict) -> str:
     """What the model's encoder is, from its hyperparameters (the shipped file's, not a
     description written by hand)."""
-    from gripdem.models.module import encoder_options
+    from gripdem.models.encoder_options import encoder_options
 
     options = encoder_options(encoder)
     name = options.get("name", "graph_conv")

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 import torch
 
 from gripdem.boundary import minimum_image, wrap_positions
@@ -71,6 +72,19 @@ class LinkChain:
     def loss(self, model, batch) -> torch.Tensor:
         """The rollout loss of one training batch (see the module doc): a scalar with gradient
         through the links that count."""
+        return self._unroll(model, batch, keep=False)[0]
+
+    @torch.no_grad()
+    def evaluate(self, model, batch) -> tuple[float, torch.Tensor]:
+        """Validation of a window of the links trained: its rollout loss (as training scores
+        it) and its predicted frames ``(B, L f, N, 3)`` float64 wrapped, from one rollout."""
+        loss, frames = self._unroll(model, batch, keep=True)
+        return float(loss), torch.from_numpy(np.concatenate(frames, axis=1))
+
+    def _unroll(self, model, batch, keep: bool) -> tuple[torch.Tensor, list[np.ndarray]]:
+        """The links of ``batch``'s windows chained: the loss of those that count and, with
+        ``keep``, every link's kept frames ``(B, f, N, 3)`` (else only the frames the next
+        link reads)."""
         f = int(model.hparams.horizon)
         links = batch.horizon // f
         if links * f != batch.horizon:
@@ -79,27 +93,26 @@ class LinkChain:
                 f"number of links of model.horizon={f}"
             )
         every = model.hparams.get("rollout_loss", "all") == "all"
-        shifted = model.hparams.get("rollout_target", "steps") == "steps"
+        shift = model.boundary if model.hparams.get("rollout_target", "steps") == "steps" else None
         stepper = self.stepper(model, batch)
-        losses = []
+        losses, frames = [], []
         for link in range(links):
             scored = every or link == links - 1
             inputs = stepper.link_batch()
             with torch.set_grad_enabled(scored and torch.is_grad_enabled()):
                 outputs = model(inputs)
             if scored:
-                shift = model.boundary if shifted else None
                 targets = with_targets(inputs, batch, link * f, f, shift)
                 losses.append(model._loss(outputs, targets))
-            if link < links - 1:
+            if link < links - 1 or keep:
                 stepper.take_link(inputs, outputs)
-                stepper.advance(f)
+                frames.append(stepper.advance(f))
                 if stepper.stopped is not None:
                     raise FloatingPointError(
                         f"rollout training: link {link + 1} of {links}: {stepper.stopped} (lower "
                         "model.lr, or train with model.rollout.links=1 first)"
                     )
-        return torch.stack(losses).mean()
+        return torch.stack(losses).mean(), frames
 
     @torch.no_grad()
     def positions(self, model, batch) -> torch.Tensor:

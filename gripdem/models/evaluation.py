@@ -57,8 +57,8 @@ class RolloutEvaluation:
     def _evaluate(self, batch, stage: str) -> None:
         members = None
         if batch.horizon > self.hparams.horizon:  # windows of several links: chained
-            positions = self.chain(batch).positions(self, batch).to(batch.times.device)
-            self.record(batch, positions, math.nan, stage)
+            loss, positions = self.chain(batch).evaluate(self, batch)
+            self.record(batch, positions.to(batch.times.device), loss, stage)
             return
         if self.is_ensemble:
             outputs = self.forward_members(batch, self.hparams.eval_members)

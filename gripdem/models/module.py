@@ -12,7 +12,6 @@ geometry and motion, :mod:`gripdem.nn.contact`; needs the exact frame).
 
 from __future__ import annotations
 
-import inspect
 import math
 from typing import Any
 
@@ -30,6 +29,12 @@ from gripdem.data.normalizer import Normalizer
 from gripdem.models import decoder_modes as modes
 from gripdem.models.autoregressive import LinearAR
 from gripdem.models.baselines import BASELINES
+from gripdem.models.encoder_options import (
+    ENCODER_OPTIONS,
+    ENCODERS,
+    current_encoder_name,
+    uses_position_features,
+)
 from gripdem.models.ensemble import EnsembleMembers, check_rollout_options
 from gripdem.models.evaluation import RolloutEvaluation
 from gripdem.models.training import TrainingSteps, check_rollout_training
@@ -38,45 +43,8 @@ from gripdem.nn.direct import DirectDecoder
 from gripdem.nn.graph_conv import EdgeGraph, GraphConvEncoder
 from gripdem.nn.seq2seq import TrajectoryDecoder
 
-ENCODERS = ("graph_conv", "contact")
-#: former encoder names (a model file written before the rename names its encoder so): old -> new
-RENAMED_ENCODERS = {"interaction": "contact"}
-#: the options each encoder reads from ``model.encoder`` (``name`` and ``cutoff`` are shared:
-#: the cut-off is the data's graph cut-off, ``data.graph_cutoff`` follows it)
-ENCODER_OPTIONS = {
-    "graph_conv": (
-        *("channels", "n_blocks", "temporal_kernel", "dropout", "trainable_graph"),
-        *("edge_feature_dim", "dense_init"),
-    ),
-    "contact": (
-        *("channels", "rounds", "edge_history", "edge_updates", "position_features"),
-        *("noise_channels", "noise_into", "noise_neighbours", "pair_channels"),
-    ),
-}
 LR_SCHEDULES = ("constant", "cosine")
 DECODERS = ("gru", "direct")
-POSITION_FEATURES = ("auto", "true", "false")
-
-
-def encoder_options(cfg: dict[str, Any] | None) -> dict[str, Any]:
-    """The options the named encoder reads, each missing one filled with the encoder's default
-    (a model saved before an option existed compares equal to one built with its default)."""
-    cfg = dict(cfg or {})
-    name = current_encoder_name(cfg.get("name", "graph_conv"))
-    if name not in ENCODER_OPTIONS:
-        return cfg
-    cls = GraphConvEncoder if name == "graph_conv" else ContactEncoder
-    params = inspect.signature(cls.__init__).parameters
-    out: dict[str, Any] = {"name": name}
-    for key in ENCODER_OPTIONS[name]:
-        default = params[key].default if key in params else None
-        out[key] = cfg.get(key, None if default is inspect.Parameter.empty else default)
-    return out
-
-
-def current_encoder_name(name: Any) -> Any:
-    """The encoder's name today: a model file keeps the name it was written with."""
-    return RENAMED_ENCODERS.get(name, name) if isinstance(name, str) else name
 
 
 def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
@@ -85,16 +53,6 @@ def boundary_from_hparams(scene: dict[str, Any]) -> Boundary:
         le = LeesEdwards(scene["shear_rate"], int(scene["le_sign"]), scene["le_time_origin"])
         return Boundary(box, le)
     return Boundary(box)
-
-
-def _uses_position_features(setting: Any, boundary: Boundary) -> bool:
-    """x-position features (contact encoder; ``auto``: periodic drive yes, sheared cell no)."""
-    setting = str(setting).lower()
-    if setting not in POSITION_FEATURES:
-        raise ValueError(
-            f"model.encoder.position_features must be one of {POSITION_FEATURES}, got {setting!r}"
-        )
-    return not boundary.is_lees_edwards if setting == "auto" else setting == "true"
 
 
 class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.LightningModule):
@@ -303,7 +261,7 @@ class TrajectoryModule(TrainingSteps, RolloutEvaluation, EnsembleMembers, L.Ligh
             )
         if self.hparams.history_len is None:
             raise ValueError("the contact encoder needs history_len")
-        self.position_features = _uses_position_features(
+        self.position_features = uses_position_features(
             options.pop("position_features", "auto"), self.boundary
         )
         static = 2 if self.position_features else 0

@@ -21,8 +21,8 @@ from typing import Any, Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from gripdem.runner.config_checks import check_rollout_training, check_split_fits_the_preset
 from gripdem.runner.renamed_options import apply_deprecated_names
-from gripdem.runner.run_names import hydra_choices
 
 log = logging.getLogger(__name__)
 
@@ -350,30 +350,12 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
             "data.protocol=in_sample tests on the training windows (train = test): report it "
             "as in-sample"
         )
-    _check_split_fits_the_preset(cfg)
-    _check_rollout_training(cfg, exact)
+    check_split_fits_the_preset(cfg)
+    check_rollout_training(cfg, exact)
     _check_logger_options(cfg.get("logger") or {})
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
-
-
-def _check_rollout_training(cfg: DictConfig, exact: bool) -> None:
-    """``model.rollout``: a number of links the split's horizon holds (one line naming the
-    option and what is allowed, before any data is read), on a point forecast in the exact
-    frame."""
-    from gripdem.data.windows import Split, resolve_rollout_links
-
-    split = Split(int(cfg.split.history), int(cfg.split.horizon))
-    link = cfg.data.get("model_horizon")
-    link = split.horizon if link is None else min(int(link), split.horizon)
-    links = resolve_rollout_links(cfg.model.rollout.links, split.horizon, link)
-    if links > 1 and (cfg.model.loss != "mse" or not exact):
-        raise ValueError(
-            f"model.rollout.links={links} trains point forecasts in the exact frame "
-            f"(model.loss=mse, model.encoding=unwrapped), got model.loss={cfg.model.loss}, "
-            f"model.encoding={cfg.model.encoding.value}: use model.rollout.links=1"
-        )
 
 
 def _check_logger_options(options) -> None:
@@ -397,25 +379,3 @@ def _check_logger_options(options) -> None:
             f"logger.{unknown[0]}: not an option of the TensorBoard logger; allowed: "
             f"{', '.join(sorted(allowed))}"
         )
-
-
-def _check_split_fits_the_preset(cfg: DictConfig) -> None:
-    """The built-in dataset's simulations hold the split's h+1+f frames: a split given on the
-    command line with a preset's smaller scene (``experiment=smoke`` chooses ``preset=tiny``)
-    is refused here, naming both, before any data is generated."""
-    if cfg.data.get("path") is not None or "frames" not in cfg.preset:
-        return
-    needed = int(cfg.split.history) + 1 + int(cfg.split.horizon)
-    frames = int(cfg.preset.frames)
-    if needed <= frames:
-        return
-    choices = hydra_choices(cfg)
-    preset = f"preset={choices.get('preset', cfg.preset.get('name'))}"
-    experiment = choices.get("experiment")
-    if experiment:
-        preset += f" (the size experiment={experiment} runs at)"
-    raise ValueError(
-        f"split={cfg.split.name} needs simulations of {needed} frames (h+1+f) but {preset} "
-        f"writes {frames} per simulation: give preset=default, or a split of at most "
-        f"{frames} frames (e.g. split=10-5)"
-    )

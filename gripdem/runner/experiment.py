@@ -40,7 +40,6 @@ from gripdem.inference.checkpoint import (
 )
 from gripdem.inference.rollout_training import attach
 from gripdem.models.autoregressive import LinearAR, fit_on_training_frames
-from gripdem.models.baselines import BASELINES
 from gripdem.models.module import TrajectoryModule
 from gripdem.runner.atomic_files import AtomicCheckpointIO
 from gripdem.runner.chained_evaluation import evaluate_chained
@@ -53,7 +52,7 @@ from gripdem.runner.finetune import (
     load_source,
     validate_start,
 )
-from gripdem.runner.outputs import physics_metrics, to_predictions, write_outputs
+from gripdem.runner.outputs import physics_metrics, result_table, to_predictions, write_outputs
 from gripdem.runner.progress import StepBudgetBar
 from gripdem.runner.resume import ResumeCheckpoint, resumed_seconds
 from gripdem.runner.tensorboard_log import (
@@ -228,49 +227,6 @@ def build_trainer(cfg: DictConfig, out_dir: Path, logger: RunLogger) -> L.Traine
         default_root_dir=str(out_dir),
         plugins=[AtomicCheckpointIO()],  # checkpoints renamed into place when complete
     )
-
-
-def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) -> str:
-    """Model vs baselines on the test windows, as a Markdown table: RMSE, and the CRPS (a
-    point forecast's is its mean absolute error; an ensemble's, its members' fair CRPS, with
-    its mean's RMSE, a member's and the spread/skill ratio below)."""
-    label = "test (IN-SAMPLE: trained on these windows)" if in_sample else "test (out of sample)"
-    rows = [
-        f"| {label} | RMSE (m) | RMSE / d | model / this | CRPS / d |",
-        "|---|---|---|---|---|",
-    ]
-    model = metrics.get("test/rmse", math.nan)
-    names = [("model", "test/rmse", "test/crps")]
-    if "test/spread_skill" in metrics:
-        names = [("model (ensemble mean; CRPS of the members)", "test/rmse", "test/crps")]
-    if "before/test/rmse" in metrics:  # fine-tuned: the source model as it was, same windows
-        tuned = "model (fine-tuned)"
-        if metrics.get("finetune/kept_start"):
-            tuned = "model (the start: training did not beat it on validation)"
-        before = "before fine-tuning"
-        if metrics.get("finetune/start_outside_scene"):
-            before += " (outside its training scene)"
-        names = [
-            (tuned, "test/rmse", "test/crps"),
-            (before, "before/test/rmse", "before/test/crps"),
-        ]
-    names += [(b, f"test/rmse_{b}", f"test/crps_{b}") for b in BASELINES]
-    for name, key, crps in names:
-        value = metrics.get(key, math.nan)
-        score = metrics.get(crps, math.nan) / diameter
-        rows.append(
-            f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} | {score:.4g} |"
-        )
-    if "test/spread_skill" in metrics:
-        member = metrics.get("test/rmse_member", math.nan)
-        rows.append(
-            f"\nensemble of {metrics.get('test/members', math.nan):.0f} members: one member's "
-            f"RMSE / d {member / diameter:.4g}, spread/skill {metrics['test/spread_skill']:.3f} "
-            "(1: calibrated), rank histogram's bins "
-            f"{metrics['test/rank_min_over_uniform']:.2f}-{metrics['test/rank_max_over_uniform']:.2f}"
-            " of uniform"
-        )
-    return "\n".join(rows)
 
 
 def test_model(model, dm: TrajectoryDataModule, test_trainer) -> dict:

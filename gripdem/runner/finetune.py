@@ -35,7 +35,7 @@ import lightning as L
 from omegaconf import DictConfig, open_dict
 
 from gripdem.inference.checkpoint import load_checkpoint_model
-from gripdem.models.module import encoder_options
+from gripdem.models.encoder_options import encoder_options
 
 #: encoder options of the latent-noise path (an ensemble may start from a model without it)
 NOISE_OPTIONS = ("noise_channels", "noise_into", "noise_neighbours")

@@ -1,8 +1,9 @@
 """What a run writes after its test: the predictions file, the physics report's metrics,
-figures (PNG and TensorBoard images) and XYZ trajectories."""
+figures (PNG and TensorBoard images) and XYZ trajectories, and the result table it prints."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -88,3 +89,46 @@ def write_outputs(
         n = predictions.n_windows if count is None else min(count, predictions.n_windows)
         windows = list(range(n))
         export_extxyz(predictions, out_dir / "trajectories", windows=windows, overwrite=True)
+
+
+def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) -> str:
+    """Model vs baselines on the test windows, as a Markdown table: RMSE, and the CRPS (a
+    point forecast's is its mean absolute error; an ensemble's, its members' fair CRPS, with
+    its mean's RMSE, a member's and the spread/skill ratio below)."""
+    label = "test (IN-SAMPLE: trained on these windows)" if in_sample else "test (out of sample)"
+    rows = [
+        f"| {label} | RMSE (m) | RMSE / d | model / this | CRPS / d |",
+        "|---|---|---|---|---|",
+    ]
+    model = metrics.get("test/rmse", math.nan)
+    names = [("model", "test/rmse", "test/crps")]
+    if "test/spread_skill" in metrics:
+        names = [("model (ensemble mean; CRPS of the members)", "test/rmse", "test/crps")]
+    if "before/test/rmse" in metrics:  # fine-tuned: the source model as it was, same windows
+        tuned = "model (fine-tuned)"
+        if metrics.get("finetune/kept_start"):
+            tuned = "model (the start: training did not beat it on validation)"
+        before = "before fine-tuning"
+        if metrics.get("finetune/start_outside_scene"):
+            before += " (outside its training scene)"
+        names = [
+            (tuned, "test/rmse", "test/crps"),
+            (before, "before/test/rmse", "before/test/crps"),
+        ]
+    names += [(b, f"test/rmse_{b}", f"test/crps_{b}") for b in BASELINES]
+    for name, key, crps in names:
+        value = metrics.get(key, math.nan)
+        score = metrics.get(crps, math.nan) / diameter
+        rows.append(
+            f"| {name} | {value:.4g} | {value / diameter:.4g} | {model / value:.3f} | {score:.4g} |"
+        )
+    if "test/spread_skill" in metrics:
+        member = metrics.get("test/rmse_member", math.nan)
+        rows.append(
+            f"\nensemble of {metrics.get('test/members', math.nan):.0f} members: one member's "
+            f"RMSE / d {member / diameter:.4g}, spread/skill {metrics['test/spread_skill']:.3f} "
+            "(1: calibrated), rank histogram's bins "
+            f"{metrics['test/rank_min_over_uniform']:.2f}-{metrics['test/rank_max_over_uniform']:.2f}"
+            " of uniform"
+        )
+    return "\n".join(rows)

@@ -248,3 +248,16 @@ def test_the_links_are_chained_from_the_start_fraction_of_the_budget(tiny_pbc_pa
     first = first_link(batch, F)
     assert first.horizon == F and first.target_positions.shape[2] == F
     torch.testing.assert_close(first.target_positions, batch.target_positions[:, :, :F])
+
+
+def test_validation_scores_the_chained_window_as_training_and_the_test_do(tiny_pbc_path):
+    """A validation window of the trained links: one rollout gives the training's rollout loss
+    and the frames the chained test predicts."""
+    model, dm = rollout_model(tiny_pbc_path)
+    perturb(model).eval()
+    batch = collate_windows([dm.datasets["val"][0]])
+    loss, positions = model.link_chain.evaluate(model, batch)
+    with torch.no_grad():
+        assert loss == pytest.approx(float(model.link_chain.loss(model, batch)), rel=1e-6)
+    torch.testing.assert_close(positions, model.link_chain.positions(model, batch))
+    assert positions.shape == (1, 2 * F, dm.meta.n_particles, 3)

@@ -1,0 +1,49 @@
+"""Checks of a composed config that need more than its schema: the split against the built-in
+preset's simulations, rollout training against the split (the scene x model x data specifics
+all run from :func:`gripdem.runner.config_schema.check_combination`, the one place that calls
+them). Light: no torch, no Lightning."""
+
+from __future__ import annotations
+
+from omegaconf import DictConfig
+
+from gripdem.data.windows import Split, resolve_rollout_links
+from gripdem.runner.run_names import hydra_choices
+
+
+def check_rollout_training(cfg: DictConfig, exact: bool) -> None:
+    """``model.rollout``: a number of links the split's horizon holds (one line naming the
+    option and what is allowed, before any data is read), on a point forecast in the exact
+    frame."""
+    split = Split(int(cfg.split.history), int(cfg.split.horizon))
+    link = cfg.data.get("model_horizon")
+    link = split.horizon if link is None else min(int(link), split.horizon)
+    links = resolve_rollout_links(cfg.model.rollout.links, split.horizon, link)
+    if links > 1 and (cfg.model.loss != "mse" or not exact):
+        raise ValueError(
+            f"model.rollout.links={links} trains point forecasts in the exact frame "
+            f"(model.loss=mse, model.encoding=unwrapped), got model.loss={cfg.model.loss}, "
+            f"model.encoding={cfg.model.encoding.value}: use model.rollout.links=1"
+        )
+
+
+def check_split_fits_the_preset(cfg: DictConfig) -> None:
+    """The built-in dataset's simulations hold the split's h+1+f frames: a split given on the
+    command line with a preset's smaller scene (``experiment=smoke`` chooses ``preset=tiny``)
+    is refused here, naming both, before any data is generated."""
+    if cfg.data.get("path") is not None or "frames" not in cfg.preset:
+        return
+    needed = int(cfg.split.history) + 1 + int(cfg.split.horizon)
+    frames = int(cfg.preset.frames)
+    if needed <= frames:
+        return
+    choices = hydra_choices(cfg)
+    preset = f"preset={choices.get('preset', cfg.preset.get('name'))}"
+    experiment = choices.get("experiment")
+    if experiment:
+        preset += f" (the size experiment={experiment} runs at)"
+    raise ValueError(
+        f"split={cfg.split.name} needs simulations of {needed} frames (h+1+f) but {preset} "
+        f"writes {frames} per simulation: give preset=default, or a split of at most "
+        f"{frames} frames (e.g. split=10-5)"
+    )

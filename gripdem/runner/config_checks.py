@@ -19,6 +19,12 @@ def check_rollout_training(cfg: DictConfig, exact: bool) -> None:
     link = cfg.data.get("model_horizon")
     link = split.horizon if link is None else min(int(link), split.horizon)
     links = resolve_rollout_links(cfg.model.rollout.links, split.horizon, link)
+    start = float(cfg.model.rollout.start)
+    if not 0.0 <= start < 1.0:
+        raise ValueError(
+            "model.rollout.start is the fraction of the training budget trained on one link "
+            f"before the links are chained, in [0, 1), got {start:g}"
+        )
     if links > 1 and (cfg.model.loss != "mse" or not exact):
         raise ValueError(
             f"model.rollout.links={links} trains point forecasts in the exact frame "

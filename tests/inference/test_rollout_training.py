@@ -210,6 +210,7 @@ def test_run_refuses_rollout_options_in_one_line_before_anything_is_written(tmp_
         (["split=190-10", "model.rollout.links=2"], "model.rollout.links=2: the split's"),
         (["split=100-100", "model.rollout.links=3"], "model.rollout.links=3 does not divide"),
         (["split=100-100", "model=ensemble", "model.rollout.links=2"], "trains point forecasts"),
+        (["split=100-100", "model.rollout.start=1.5"], "model.rollout.start is the fraction"),
     )
     for case, (options, expected) in enumerate(cases):
         out = tmp_path / f"run{case}"

@@ -117,7 +117,7 @@ class LinkChain:
     @torch.no_grad()
     def positions(self, model, batch) -> torch.Tensor:
         """The window's predicted frames, chained over its horizon ``(B, f_window, N, 3)``
-        float64 wrapped (validation; the test of a chained model)."""
+        float64 wrapped (the test of a chained model: any horizon, not only whole links)."""
         stepper = self.stepper(model, batch)
         predicted = stepper.advance(batch.horizon)
         if stepper.stopped is not None:

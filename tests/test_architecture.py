@@ -23,8 +23,9 @@ ENTRY_POINTS = {
     "summary",
 }
 #: the package version, one place (imported by the layers that stamp files with it), and where
-#: the configuration files are (read by the entry points and the API)
-GROUND_MODULES = {"_version", "config_files", "errors"}
+#: the configuration files are (read by the entry points and the API), and the result files'
+#: header (``provenance``: standard library only, written by the CLIs and the benchmarks)
+GROUND_MODULES = {"_version", "config_files", "errors", "provenance"}
 LAYERS = {
     "api",  # the Python entry point: the stable names re-exported at ``gripdem``
     "boundary",

@@ -198,7 +198,7 @@ def test_doc_figures_are_the_current_ones():
     """docs/assets/ holds copies (the site cannot reach files outside docs/): each must equal
     the figure the experiments wrote; re-copy it when it was regenerated."""
     for asset in (DOCS / "assets").glob("*.png"):
-        sources = [d / asset.name for d in FIGURE_SOURCES if (d / asset.name).exists()]
+        sources = [p for d in FIGURE_SOURCES for p in sorted(d.rglob(asset.name))]
         assert sources, f"{asset.name}: no figure of that name under experiments/"
         assert asset.read_bytes() == sources[0].read_bytes(), (
             f"docs/assets/{asset.name} is stale: cp {sources[0].relative_to(ROOT)} docs/assets/"
@@ -216,7 +216,8 @@ def _readme_results():
 
 
 def test_the_readme_results_table_is_its_source_file():
-    """The README's results table is regenerated from experiments/results/decoder_modes.md by
+    """The README's results table is regenerated from
+    experiments/results/decoder_modes/decoder_modes.md by
     experiments/release/readme_results.py; its --check fails, naming both, when they differ."""
     proc = subprocess.run(
         [sys.executable, "experiments/release/readme_results.py", "--check"],

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The accuracy sweep of the results (docs/explanation/results.md): default scenes, protocol sims,
+# The accuracy sweep of gripdem 0.1.0 (the history section of docs/explanation/results.md; the
+# current tables come from decoder_modes_sweep.sh): default scenes, protocol sims,
 # seeds 0-2, the four paper splits, both scenes; the contact model and the paper's models in
 # the exact frame.
 # Two jobs at a time, one thread each (2 cores). The paper's models train 2 epochs instead of

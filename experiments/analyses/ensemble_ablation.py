@@ -4,7 +4,7 @@ runs' own outputs (never re-measured here).
     python experiments/analyses/ensemble_ablation.py \\
         --row "pbc|deterministic|runs/pbc_det/metrics.json|bench/pbc.json|pbc (reference)" \\
         --row "pbc|ensemble, CRPS|runs/pbc_ens/metrics.json|bench/pbc.json|pbc" ...
-        [--out experiments/results/ensemble_ablation]
+        [--out experiments/results/ensembles/ensemble_ablation]
 
 A row is ``SCENE|LABEL|METRICS.json|SURROGATE.json|ENTRY``: the run's ``metrics.json``
 (``python -m gripdem.run``: 190-10 test windows, out of sample; an ensemble's RMSE is its
@@ -16,7 +16,8 @@ Columns: 190-10 RMSE ÷ CV, CRPS / d, spread/skill at step 1 and step 10, the ra
 extreme bins over uniform; and over 2000 frames: the worst |ratio - 1| of the non-affine MSD at
 lags 1, 10, 100, of the RMS non-affine step, of the contacts within 1.01 d, of the flow profile,
 the worst g(r) L1, the worst |D / D_truth - 1| over the axes, the spread/skill range over frames
-1-100, and the model's ms per member and frame.
+1-100, and the model's ms per member and frame. Writes ``OUT.md`` (the result header, then the
+table and its sources) and ``OUT.json`` (the header's fields under ``header``) and prints the table.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "experiments" / "benchmarks"))
-from benchlib import machine_line, markdown_table  # noqa: E402
+from benchlib import machine_line, markdown_table, write_report  # noqa: E402
 
 HEADERS = [
     "scene",
@@ -129,7 +130,9 @@ def surrogate_columns(entry: dict | None) -> list[str]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--row", action="append", required=True, metavar="SCENE|LABEL|M|S|E")
-    parser.add_argument("--out", type=Path, default=ROOT / "experiments/results/ensemble_ablation")
+    parser.add_argument(
+        "--out", type=Path, default=ROOT / "experiments/results/ensembles/ensemble_ablation"
+    )
     args = parser.parse_args(argv)
     rows, sources, blocks = [], [], set()
     for spec in args.row:
@@ -149,7 +152,7 @@ def main(argv: list[str] | None = None) -> None:
     block = blocks.pop() if blocks else 0
     text = "\n".join(
         [
-            f"machine: {machine_line()}",
+            machine_line(),
             "",
             "Ensemble ablation (seed 0 unless the row says; 190-10 test windows out of sample; "
             f"2000-frame surrogate runs on a new DEM simulation, worst {block}-frame block and "
@@ -164,12 +167,7 @@ def main(argv: list[str] | None = None) -> None:
             "",
         ]
     )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".md").write_text(text)
-    args.out.with_suffix(".json").write_text(
-        json.dumps({"headers": HEADERS, "rows": rows}, indent=1)
-    )
-    print(text)
+    write_report(args.out, text, {"headers": HEADERS, "rows": rows})
 
 
 if __name__ == "__main__":

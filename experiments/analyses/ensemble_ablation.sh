@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The ensemble ablation on the lean default encoder (docs/explanation/surrogate.md#ensembles):
+# The ensemble ablation on the default contact encoder (docs/explanation/surrogate.md#ensembles):
 # per scene, the ensemble fine-tuned from the shipped deterministic model (twice: the rollout
 # settings off, and the shipped settings, so each run's 190-10 test scores its own noise), then
 # 2000-frame rollouts against the same new DEM simulation (seed 777), 8 members (statistics of 4),
@@ -43,7 +43,7 @@ json.dump(r(sys.argv[1], tensors=False)[2]['metrics'], open(sys.argv[2], 'w'))" 
   rows+=(--row "$s|deterministic, pairs exactly touching|$det|$r/${s}_det_plain.json|$s")
   rows+=(--row "$s|deterministic + resting overlap|$det|$r/${s}_chosen.json|$s (reference)")
   rows+=(--row "$s|deterministic + contact capture ${capture[$s]}|$det|$r/${s}_det_capture.json|$s")
-  rows+=(--row "$s|ensemble (lean encoder), no lever|$plain|$r/${s}_ens_alone.json|$s")
+  rows+=(--row "$s|ensemble (default encoder), no lever|$plain|$r/${s}_ens_alone.json|$s")
   rows+=(--row "$s|ensemble + contact capture ${capture[$s]}|$plain|$r/${s}_ens_capture.json|$s")
   rows+=(--row "$s|ensemble + inflation ${inflation[$s]}|$ship|$r/${s}_ens_inflation.json|$s")
   rows+=(--row "$s|shipped without the resting overlap|$ship|$r/${s}_ens_touching.json|$s")

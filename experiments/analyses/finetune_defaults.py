@@ -19,7 +19,7 @@ simulations). Per scene, ``python -m gripdem.run model.init_from=SOURCE`` runs
 all from the same seed, and the table shows the source as it is and each run's test RMSE ÷ CV
 (out of sample), the best validation RMSE against the start's, whether the run kept the start
 (training did not beat it on validation), the trained model's own test RMSE then, and the
-training time. Output: ``experiments/results/finetune_defaults.{md,json}``.
+training time. Output: ``experiments/results/fine_tuning/finetune_defaults.{md,json}``.
 """
 
 from __future__ import annotations
@@ -83,7 +83,9 @@ def main() -> None:
         "--candidates-only", action="store_true", help="only the candidates (no run at today's lr)"
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads of each run")
-    parser.add_argument("--out", default=str(ROOT / "experiments/results/finetune_defaults"))
+    parser.add_argument(
+        "--out", default=str(ROOT / "experiments/results/fine_tuning/finetune_defaults")
+    )
     args = parser.parse_args()
     print(machine_line(), flush=True)
     settings = []

@@ -2,13 +2,14 @@
 seeds, a difference within the seed spread reported as none.
 
     python experiments/analyses/mode_differences.py SWEEP_DIR [SWEEP_DIR ...]
-        [--models grip pct vct] [--out experiments/results/decoder_modes_differences.md]
+        [--models grip pct vct]
+        [--out experiments/results/decoder_modes/decoder_modes_differences.md]
 
 Reads the jobs' ``metrics.json`` (grouped by scene, split and model over seeds, as
 ``sweep_report.py`` does) and, for each scene, split and pair of models, compares the test
 RMSE with the rule of ``gripdem.claims`` (:func:`gripdem.evaluation.claims.beats`): the
 difference of the means beyond 2 standard errors of the difference is a difference, anything
-less is none. Writes the table to ``--out`` and prints it.
+less is none. Writes the table to ``--out`` (after the result header) and prints it.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 
 from gripdem.evaluation.claims import HELD, NOT_HELD, beats
 from gripdem.evaluation.sweep_summary import runs_by_group
+from gripdem.provenance import write_result
 
 
 def ratio(groups, scene, split, model, key="test/rmse_ratio_constant_velocity") -> str:
@@ -37,7 +39,9 @@ def main(argv=None) -> int:
     parser.add_argument("sweeps", nargs="+", type=Path)
     parser.add_argument("--models", nargs="+", default=["grip", "pct", "vct"])
     parser.add_argument(
-        "--out", type=Path, default=Path("experiments/results/decoder_modes_differences.md")
+        "--out",
+        type=Path,
+        default=Path("experiments/results/decoder_modes/decoder_modes_differences.md"),
     )
     args = parser.parse_args(argv)
     groups = runs_by_group(args.sweeps)
@@ -70,8 +74,7 @@ def main(argv=None) -> int:
                 f"{ratio(groups, scene, split, b)} | {evidence} | {verdict} |"
             )
     text = "\n".join(lines) + "\n"
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    write_result(args.out, text)
     print(text)
     return 0
 

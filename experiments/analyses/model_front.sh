@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The model-size grid behind experiments/results/model_front.md (the time-vs-error front):
+# The model-size grid behind experiments/results/model_cost/model_front.md (the time-vs-error front):
 # the default scene of each given scene, split 190-10, the fast preset, seed 0, one run per
 # configuration, trained one after the other (each uses both cores), then measured by
 # experiments/benchmarks/surrogate/model_front.py.

@@ -5,7 +5,7 @@ lowest of the 20 losses before step N) under ATEN_CPU_CAPABILITY = default | avx
 the trace of an N-step run).
 
     python experiments/analyses/overfit_folds.py [--workdir DIR] [--steps 100 120 150 200]
-        [--out experiments/results/overfit_folds]
+        [--out experiments/results/test_suite/overfit_folds]
 
 Each combination runs in its own process (``--workdir`` keeps its JSON: a finished combination
 is read back, not run again). The test's step count and fold bound are chosen from this table:
@@ -65,7 +65,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workdir", type=Path, default=None)
     parser.add_argument("--steps", type=int, nargs="+", default=[100, 120, 150, 200])
-    parser.add_argument("--out", type=Path, default=ROOT / "experiments/results/overfit_folds")
+    parser.add_argument(
+        "--out", type=Path, default=ROOT / "experiments/results/test_suite/overfit_folds"
+    )
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)  # a combination's process
     args = parser.parse_args(argv)
     if any(not 20 <= n <= TOTAL_STEPS for n in args.steps):

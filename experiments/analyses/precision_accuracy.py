@@ -1,6 +1,7 @@
 """A trained run's out-of-sample accuracy with its encoder in fp32 and in bf16, side by side.
 
     python experiments/analyses/precision_accuracy.py RUN_DIR [RUN_DIR ...] [--json out.json]
+        [--out experiments/results/model_cost/precision_accuracy]
 
 Each run directory (``python -m gripdem.run``'s output: ``.hydra/config.yaml`` and
 ``checkpoints/best.ckpt``) is tested on its own test windows (the runner's test path: Lightning's
@@ -8,6 +9,8 @@ test step, or the stepper where the split's horizon is longer than the model's) 
 encoder's weights in fp32, as trained, and cast to bf16 (:mod:`gripdem.inference.precision`; the
 encoder's inputs are formed in fp32 and its output cast back). Prints RMSE / CV's for both and
 their ratio. bf16 is emulated where the CPU has no bf16 units: slower, the same numbers.
+``--out STEM`` writes ``STEM.md`` (the result header, then the table) and ``STEM.json`` (the
+header's fields under ``header``, the rows under ``results``); ``--json`` the JSON alone.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import torch
 from omegaconf import OmegaConf
 
 from gripdem.inference.checkpoint import load_checkpoint_model
+from gripdem.provenance import atomic_write, result_fields, write_report
 from gripdem.runner.experiment import build_datamodule, resolve_data_path, test_model
 
 
@@ -45,18 +49,24 @@ def accuracy(run: Path) -> dict:
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+")
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="the JSON alone")
+    ap.add_argument("--out", type=Path, default=None, help="STEM: STEM.md and STEM.json")
     args = ap.parse_args(argv)
     rows = []
-    print("| run | fp32 RMSE / CV | bf16 RMSE / CV | bf16 / fp32 |\n|---|---|---|---|")
+    lines = ["| run | fp32 RMSE / CV | bf16 RMSE / CV | bf16 / fp32 |", "|---|---|---|---|"]
+    print("\n".join(lines))
     for run in args.runs:
         row = accuracy(run)
         rows.append(row)
-        print(
+        lines.append(
             f"| {run.name} | {row['fp32']:.4f} | {row['bf16']:.4f} | {row['bf16_over_fp32']:.4f} |"
         )
+        print(lines[-1])
+    if args.out:
+        write_report(args.out, "\n".join(lines), rows, echo=False)
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=2))
+        payload = {"header": result_fields(), "results": rows}
+        atomic_write(args.json, json.dumps(payload, indent=2) + "\n")
     return rows
 
 

@@ -1,7 +1,7 @@
 """Rollout training's ablation table: accuracy, training cost and the raw frames of trained runs.
 
     python experiments/analyses/rollout_training.py --runs RUN_DIR [RUN_DIR ...]
-        [--windows 8] [--out experiments/results/rollout_training]
+        [--windows 8] [--out experiments/results/rollout_training/rollout_training]
 
 Each ``RUN_DIR`` is one ``python -m gripdem.run`` output folder (``metrics.json``,
 ``checkpoints/best.ckpt``, ``.hydra/config.yaml``), e.g. every job folder of a multirun

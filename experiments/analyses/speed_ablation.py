@@ -2,7 +2,7 @@
 encoder's forward time of the same form (``encoder_speed.py``'s JSON).
 
     python experiments/analyses/speed_ablation.py --runs-root RUNS --encoder-json E.json
-        [--out experiments/results/speed_ablation]
+        [--out experiments/results/time_vs_error/speed_ablation]
 
 ``RUNS`` holds one ``python -m gripdem.run`` output folder per run, named
 ``<scene>_<variant>_s<seed>`` (``metrics.json`` in each); the variants and their encoder rows are
@@ -10,6 +10,8 @@ listed in :data:`VARIANTS`. Per variant and scene: 190-10 test RMSE / CV's (mean
 seeds present, each seed listed), the training steps and wall time (the machine was shared with
 the other runs and benchmarks of the day: read the times as rough), and the encoder's forward
 time at 2000 and 32 000 particles (one thread, untrained weights, fp32 and bf16 where measured).
+``--out STEM`` writes ``STEM.md`` (the result header, then the table) and ``STEM.json`` (the runs
+per variant and scene, the header's fields under ``header``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from gripdem.provenance import write_report
 
 #: run-name variant -> (label, encoder_speed.py's fp32 row, its bf16 row or None)
 LEAN_ROW = "off + 32 ch. + 1.15 d + chunked"
@@ -112,10 +116,7 @@ def main(argv: list[str] | None = None) -> str:
     )
     print(text)
     if args.out:
-        args.out.with_suffix(".md").write_text(text + "\n")
-        args.out.with_suffix(".json").write_text(
-            json.dumps({f"{k[0]}/{k[1]}": v for k, v in runs.items()}, indent=2)
-        )
+        write_report(args.out, text, {f"{k[0]}/{k[1]}": v for k, v in runs.items()}, echo=False)
     return text
 
 

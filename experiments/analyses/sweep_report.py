@@ -7,11 +7,11 @@ Reads every job's ``metrics.json`` (through :func:`gripdem.evaluation.sweep_summ
 groups the jobs by (scene, split, model) over seeds and writes into ``--out`` (file names from
 ``--name``, default ``results``):
 
-- ``results.md``: per scene, RMSE / d and the ratio to constant velocity (CV) and to the linear
-  AR baseline as mean ± std over seeds, beside CV, AR and the mean-flow profile, LE crossers
-  separately (model / CV / AR with their count), the model's overlap fraction at the last
-  predicted step (particles within 0.98 d of a neighbour; the truth has none), training
-  seconds;
+- ``results.md`` (after the result header): per scene, RMSE / d and the ratio to constant
+  velocity (CV) and to the linear AR baseline as mean ± std over seeds, beside CV, AR and the
+  mean-flow profile, LE crossers separately (model / CV / AR with their count), the model's
+  overlap fraction at the last predicted step (particles within 0.98 d of a neighbour; the truth
+  has none), training seconds;
 - ``results_rmse_by_split.png``: RMSE / d against the split for every model and baseline, both
   scenes (the paper's first figure, out of sample, with seed error bars);
 - ``results_ratio_to_cv.png``: RMSE / CV per split and model (below 1: better than CV);
@@ -35,9 +35,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from gripdem.data.h5io import atomic_path
 from gripdem.evaluation.sweep_summary import runs_by_group
 from gripdem.plots.common import save_figure
+from gripdem.provenance import write_result
 
 SPLIT_ORDER = ("190-10", "180-20", "150-50", "100-100")
 BASELINES = ("constant_velocity", "linear_ar", "mean_flow")
@@ -253,8 +253,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     markdown = results_markdown(groups)
-    with atomic_path(out / f"{args.name}.md", overwrite=True) as tmp:
-        tmp.write_text(markdown)
+    write_result(out / f"{args.name}.md", markdown)
     print(markdown)
     figures = {
         f"{args.name}_rmse_by_split": plot_rmse_by_split(groups, ratio=False),

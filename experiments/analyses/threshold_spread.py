@@ -2,7 +2,8 @@
 combination of ATEN_CPU_CAPABILITY and torch threads, with every numeric check written down.
 
     python experiments/analyses/threshold_spread.py [--capabilities default avx2 avx512]
-        [--threads 1 2] [--workers 2] [--workdir DIR] [--out experiments/results/threshold_spread]
+        [--threads 1 2] [--workers 2] [--workdir DIR]
+        [--out experiments/results/test_suite/threshold_spread]
         [TESTS...]
 
 For each combination the default test tier (or the TESTS given) runs in a subprocess with
@@ -235,7 +236,9 @@ def main() -> None:
         "--workers", type=int, default=1, help="cores to use: pytest-xdist workers x torch threads"
     )
     parser.add_argument("--workdir", help="keep the runs' logs here (and reuse finished ones)")
-    parser.add_argument("--out", default=str(ROOT / "experiments/results/threshold_spread"))
+    parser.add_argument(
+        "--out", default=str(ROOT / "experiments/results/test_suite/threshold_spread")
+    )
     args = parser.parse_args()
     available = cpu_capabilities()
     caps = [c for c in (args.capabilities or available) if c in available]

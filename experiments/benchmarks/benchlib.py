@@ -12,7 +12,7 @@
 - :func:`scene_dataset`: the built-in dataset of a scene and preset (from the cache; generated
   there if missing, as ``python -m gripdem.run`` would).
 
-The scripts live in one folder per question (``GROUPS``): ``end_to_end/`` (the mission's
+The scripts live in one folder per question (``GROUPS``): ``end_to_end/`` (the README's
 command, run time against error), ``surrogate/`` (the surrogate against the DEM and LAMMPS),
 ``model_cost/`` (where a forward pass and a training step spend their time, and how they
 scale) and ``robustness/`` (killed commands, stress). A script puts this folder on
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import ctypes
 import os
-import platform
 import sys
 import threading
 import time
@@ -34,6 +33,17 @@ import numpy as np
 import torch
 import yaml
 
+from gripdem.provenance import (  # noqa: F401  (re-exported: the scripts import them from here)
+    HEADER_MARK,
+    atomic_write,
+    available_cpus,
+    cpu_model,
+    result_fields,
+    result_header,
+    write_report,
+    write_result,
+)
+
 CONF = Path(__file__).resolve().parents[2] / "conf"
 GIB = 2**30
 #: the benchmark scripts' folders, one per question (see the module doc)
@@ -42,22 +52,6 @@ for _group in GROUPS:
     _folder = str(Path(__file__).resolve().parent / _group)
     if _folder not in sys.path:
         sys.path.append(_folder)
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-def available_cpus() -> int:
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def memory_gib() -> tuple[float, float]:
@@ -98,81 +92,6 @@ def markdown_table(headers: list[str], rows: list[list]) -> str:
 
 
 REPO = Path(__file__).resolve().parents[2]
-#: the first characters of every result file's header line (tests and the docs check for it)
-HEADER_MARK = "> Measured "
-
-
-def _relative(argument: str) -> str:
-    """A command-line argument with paths inside the repository made relative to it and the
-    home folder written ``~`` (a result file names no machine's folders)."""
-    for prefix, short in ((str(REPO) + "/", ""), (str(Path.home()) + "/", "~/")):
-        argument = argument.replace(prefix, short)
-    return argument
-
-
-def _git(*args: str) -> str:
-    import subprocess
-
-    try:
-        out = subprocess.run(
-            ["git", *args], cwd=REPO, capture_output=True, text=True, timeout=10, check=True
-        )
-        return out.stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return ""
-
-
-def result_fields(argv: list[str] | None = None) -> dict:
-    """What a result file's header says: date (UTC), commit (``+`` where the tree had
-    uncommitted changes to tracked files), CPU model, CPUs, torch threads, the command."""
-    import datetime
-    import shlex
-
-    argv = sys.argv if argv is None else argv
-    commit = _git("rev-parse", "--short", "HEAD") or "unknown"
-    if _git("status", "--porcelain", "--untracked-files=no"):
-        commit += "+"
-    script = _relative(str(Path(argv[0]).resolve())) if argv else ""
-    return {
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-        "commit": commit,
-        "cpu": cpu_model(),
-        "cpus": available_cpus(),
-        "torch_threads": torch.get_num_threads(),
-        "command": shlex.join(["python", script, *map(_relative, argv[1:])]),
-    }
-
-
-def result_header(fields: dict | None = None) -> str:
-    """The one header line of a Markdown result file (from :func:`result_fields`)."""
-    f = fields or result_fields()
-    return (
-        f"{HEADER_MARK}{f['date']} at commit {f['commit']} on {f['cpu']} ({f['cpus']} CPUs, "
-        f"torch {f['torch_threads']} thread(s)) by `{f['command']}`"
-    )
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
-
-
-def write_report(stem: str | Path, text: str, data) -> None:
-    """``STEM.md`` (the header line, then the printed report) and ``STEM.json`` (the header's
-    fields under ``header`` beside the keys of ``data``, a mapping; other data under
-    ``results``), each written whole; then print the report."""
-    import json
-
-    stem = Path(stem)
-    fields = result_fields()
-    _atomic_write(stem.with_suffix(".md"), f"{result_header(fields)}\n\n{text.rstrip()}\n")
-    if isinstance(data, dict):
-        payload = {"header": fields, **data}
-    else:
-        payload = {"header": fields, "results": data}
-    _atomic_write(stem.with_suffix(".json"), json.dumps(payload, indent=1, default=str))
-    print(text)
 
 
 def fmt(value: float, digits: int = 3) -> str:

@@ -1,7 +1,8 @@
 """The README's results table, regenerated from the file it comes from.
 
 The README shows the decoder modes' table (RMSE / d, ÷ CV, ÷ AR, overlap; mean ± std over
-seeds) for both scenes; ``experiments/results/decoder_modes.md`` is its source (written by
+seeds) for both scenes; ``experiments/results/decoder_modes/decoder_modes.md`` is its source
+(written by
 ``bash experiments/analyses/decoder_modes_sweep.sh``). The table sits between the markers
 ``<!-- results table: ... -->`` and ``<!-- /results table -->``. This script rewrites it
 from the source; ``--check`` exits with status 1, naming both files, when the README
@@ -21,7 +22,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
-SOURCE = ROOT / "experiments" / "results" / "decoder_modes.md"
+SOURCE = ROOT / "experiments" / "results" / "decoder_modes" / "decoder_modes.md"
 BEGIN = "<!-- results table: experiments/release/readme_results.py -->"
 END = "<!-- /results table -->"
 #: the source's columns shown in the README, and the scenes in the README's order

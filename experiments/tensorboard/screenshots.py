@@ -9,7 +9,7 @@ browser download is needed) and saves one PNG per view. It also prints what Tens
 reader finds in LOGDIR (runs, HParams keys with types, hp/ metrics, tag counts), the same
 account the tests check (gripdem.evaluation.tensorboard_runs).
 
-    python -m gripdem.run -m split=190-10,100-100 model=vct        # the mission's sweep
+    python -m gripdem.run -m split=190-10,100-100 model=vct        # the split sweep
     python experiments/tensorboard/screenshots.py multirun/<date>
     cp experiments/figures/tensorboard_*.png docs/assets/   # the docs' copies
 """

@@ -1,7 +1,7 @@
 """Run time against error: trained models vs the DEM solver vs the baselines, per scene and split.
 
     python experiments/benchmarks/end_to_end/time_vs_error.py RUN_OR_SWEEP_DIR... [--dem-frames N]
-        [--windows N] [--threads 1] [--out-dir experiments/results]
+        [--windows N] [--threads 1] [--out-dir experiments/results/time_vs_error]
     python experiments/benchmarks/end_to_end/time_vs_error.py --quick   # two smoke models first
 
 Every ``RUN_OR_SWEEP_DIR`` is a ``python -m gripdem.run`` output directory (``metrics.json``,
@@ -24,11 +24,12 @@ was scored on, rebuilt from its config):
   springs are not stored and start at zero) and timed over ``--dem-frames`` frames (default:
   as many as the test windows predict); its error is 0 by definition.
 
-Writes ``time_vs_error.md`` (one table per scene and split, the machine line above them),
-``time_vs_error.json`` and the Pareto plot ``pareto_time_vs_error.png`` (wall time on a log
-axis against RMSE / d, the non-dominated points joined) into ``--out-dir``. ``--quick``
-(the slow test tier): two windows, three DEM frames, and without run directories it first trains
-the smoke preset (``experiment=smoke``, tiny scene, seconds) on both scenes.
+Writes ``time_vs_error.md`` (the result header, then one table per scene and split, the machine
+line above them), ``time_vs_error.json`` (the header's fields under ``header``) and the Pareto
+plot ``pareto_time_vs_error.png`` (wall time on a log axis against RMSE / d, the non-dominated
+points joined) into ``--out-dir``. ``--quick`` (the slow test tier): two windows, three DEM
+frames, and without run directories it first trains the smoke preset (``experiment=smoke``, tiny
+scene, seconds) on both scenes.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import machine_line, set_threads, train_run  # noqa: E402
+from benchlib import machine_line, set_threads, train_run, write_report  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 from time_vs_error_report import Row, break_even, plot, replot, table  # noqa: E402
 from time_vs_error_timing import (  # noqa: E402
@@ -188,7 +189,7 @@ def main(argv: list[str] | None = None) -> dict:
     out = args.out_dir or (
         Path(tempfile.mkdtemp(prefix="gripdem-time-vs-error-"))
         if args.quick
-        else Path("experiments/results")
+        else Path("experiments/results/time_vs_error")
     )
     out.mkdir(parents=True, exist_ok=True)
     run_dirs = args.runs
@@ -290,8 +291,7 @@ def main(argv: list[str] | None = None) -> dict:
         )
     text = "\n".join(lines)
     print("\n" + text)
-    (out / "time_vs_error.md").write_text(text + "\n")
-    (out / "time_vs_error.json").write_text(json.dumps(report, indent=2, default=str))
+    write_report(out / "time_vs_error", text, report, echo=False)
     figure = out / "pareto_time_vs_error.png"
     plot(groups, figure, " (QUICK: a few test windows, DEM extrapolated)" if args.quick else "")
     print(f"wrote {out / 'time_vs_error.md'}, {out / 'time_vs_error.json'}, {figure}")

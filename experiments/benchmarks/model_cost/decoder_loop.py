@@ -2,6 +2,7 @@
 
     python experiments/benchmarks/model_cost/decoder_loop.py \
         [--threads 1] [--repeats 3] [--json out.json]
+        [--out experiments/results/model_cost/decoder_loop]
     python experiments/benchmarks/model_cost/decoder_loop.py --quick   # 200 particles, one repeat
 
 :class:`gripdem.nn.seq2seq.TrajectoryDecoder` with the same weights, run two ways in one
@@ -12,7 +13,9 @@ heads of 2 GRU layers, the graph-conv encoder's 32 features over ``history`` = 1
 steps (the default preset's history), state and output of the paper's sin/cos modes (6 channels),
 at the horizons of 190-10 and 100-100 and hidden 32 (the default preset) and 350 (the paper).
 ``max |Δ|``: the largest difference between the two outputs and between their gradients,
-relative to the largest value (float32 round-off: identical outputs).
+relative to the largest value (float32 round-off: identical outputs). ``--out STEM`` writes
+``STEM.md`` (the result header, then the printed report) and ``STEM.json``; ``--json`` the JSON
+alone (with the header's fields under ``header``).
 """
 
 from __future__ import annotations
@@ -28,7 +31,15 @@ from pathlib import Path
 import torch
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import fmt, machine_line, markdown_table, set_threads  # noqa: E402
+from benchlib import (  # noqa: E402
+    atomic_write,
+    fmt,
+    machine_line,
+    markdown_table,
+    result_fields,
+    set_threads,
+    write_report,
+)
 
 from gripdem.nn.seq2seq import TrajectoryDecoder  # noqa: E402
 
@@ -104,7 +115,8 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="200 particles, one repeat")
-    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--json", type=Path, default=None, help="the JSON alone")
+    parser.add_argument("--out", type=Path, default=None, help="STEM: STEM.md and STEM.json")
     args = parser.parse_args(argv)
     set_threads(args.threads)
     cases = [(s, f, h, 200 if args.quick else n) for s, f, h, n in CASES]
@@ -113,35 +125,43 @@ def main(argv=None) -> int:
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
     ).stdout.strip()
-    print(f"# Decoder loop: forward + backward, {datetime.date.today()}, commit {commit}")
-    print(machine_line())
-    print(
-        markdown_table(
-            [
-                "split",
-                "hidden",
-                "particles",
-                "cell-by-cell (s)",
-                "batched (s)",
-                "speed-up",
-                "max rel. |Δ|",
-            ],
-            [
+    machine = machine_line()
+    text = "\n".join(
+        [
+            f"# Decoder loop: forward + backward, {datetime.date.today()}, commit {commit}",
+            machine,
+            markdown_table(
                 [
-                    r["split"],
-                    r["hidden"],
-                    r["particles"],
-                    fmt(r["reference_s"]),
-                    fmt(r["batched_s"]),
-                    f"{r['speedup']:.2f}x",
-                    f"{r['max_relative_gap']:.1e}",
-                ]
-                for r in rows
-            ],
-        )
+                    "split",
+                    "hidden",
+                    "particles",
+                    "cell-by-cell (s)",
+                    "batched (s)",
+                    "speed-up",
+                    "max rel. |Δ|",
+                ],
+                [
+                    [
+                        r["split"],
+                        r["hidden"],
+                        r["particles"],
+                        fmt(r["reference_s"]),
+                        fmt(r["batched_s"]),
+                        f"{r['speedup']:.2f}x",
+                        f"{r['max_relative_gap']:.1e}",
+                    ]
+                    for r in rows
+                ],
+            ),
+        ]
     )
+    print(text)
+    report = {"machine": machine, "rows": rows}
+    if args.out:
+        write_report(args.out, text, report, echo=False)
     if args.json:
-        args.json.write_text(json.dumps({"machine": machine_line(), "rows": rows}, indent=1))
+        payload = {"header": result_fields(), **report}
+        atomic_write(args.json, json.dumps(payload, indent=1) + "\n")
     return 0
 
 

@@ -3,17 +3,18 @@
     python experiments/benchmarks/model_cost/scaling.py [--scene pbc] [--ops sparse dense contact]
         [--sizes 2000 4000 8000 16000 32000 64000] [--histories 10 50 190]
         [--threads 1 2] [--memory-budget-gb 8] [--max-seconds 120] [--json out.json]
+        [--out experiments/results/model_cost/scaling]
     python experiments/benchmarks/model_cost/scaling.py --quick
         # tiny scene: 400 and 1600 particles
 
 Three forms of the model, each the real :class:`~gripdem.models.module.TrajectoryModule` at
 the default preset's widths (untrained: the same operations and time as trained):
 
-- ``sparse``: ``model=grip``, the paper's graph-conv encoder with the sparse graph operation
+- ``sparse``: ``model=grip_paper``, the paper's graph-conv encoder with the sparse graph operation
   (G_fixed + learned edge weights on the edge list; cut-off 3 d, ~107 neighbours);
 - ``dense``: the same with ``model.encoder.trainable_graph=dense``: a learned n x n matrix per
   block beside G_fixed (the paper's form; O(n^2) memory and time);
-- ``contact``: ``model=contact``, the default (cut-off 1.3 d, ~9 neighbours).
+- ``contact``: ``model=contact``, the default contact encoder (cut-off 1.15 d, ~6.5 neighbours).
 
 States are the scene's default dataset tiled along y and z (2000 x 2^m particles, the same
 neighbourhoods), windows built by the training code (:class:`WindowDataset`). Per case:
@@ -29,6 +30,9 @@ Memory is estimated before every case (from the previous size of the same case s
 or n^2 for ``dense``, else from a formula) and a case over ``--memory-budget-gb`` is skipped;
 a case whose time estimate (the previous size's, scaled the same way) exceeds
 ``--max-seconds`` is skipped too.
+
+``--out STEM`` writes ``STEM.md`` (the result header, then the printed table) and ``STEM.json``;
+``--json`` the JSON alone (with the header's fields under ``header``).
 """
 
 from __future__ import annotations
@@ -49,13 +53,16 @@ sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it add
 from benchlib import (  # noqa: E402
     GIB,
     PeakMemory,
+    atomic_write,
     fmt,
     machine_line,
     markdown_table,
     release_freed_memory,
+    result_fields,
     scene_dataset,
     set_threads,
     tile_frames,
+    write_report,
 )
 
 from gripdem.data.batch import collate_windows  # noqa: E402
@@ -67,8 +74,8 @@ from gripdem.inference.checkpoint import data_scene  # noqa: E402
 from gripdem.models.module import TrajectoryModule  # noqa: E402
 
 OPS = {
-    "sparse": ["model=grip"],
-    "dense": ["model=grip", "model.encoder.trainable_graph=dense"],
+    "sparse": ["model=grip_paper"],
+    "dense": ["model=grip_paper", "model.encoder.trainable_graph=dense"],
     "contact": ["model=contact"],
 }
 #: exponent of n in memory and time: the dense n x n matrices dominate at scale
@@ -210,7 +217,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--memory-budget-gb", type=float, default=8.0)
     ap.add_argument("--max-seconds", type=float, default=120.0)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="the JSON alone")
+    ap.add_argument("--out", type=Path, default=None, help="STEM: STEM.md and STEM.json")
     args = ap.parse_args(argv)
     if args.quick:
         preset, split = "tiny", "20-5"
@@ -274,7 +282,7 @@ def main(argv: list[str] | None = None) -> dict:
                     release_freed_memory()
                 results.append(row)
                 print(json.dumps(row), flush=True)
-    header = machine_line()
+    machine = machine_line()
     rows = []
     for r in results:
         rows.append(
@@ -306,11 +314,16 @@ def main(argv: list[str] | None = None) -> dict:
         ],
         rows,
     )
-    print(f"\n{header}\n\nscene {args.scene}, split {split}{' (QUICK)' if args.quick else ''}")
+    text = (
+        f"{machine}\n\nscene {args.scene}, split {split}{' (QUICK)' if args.quick else ''}\n\n"
+        + text
+    )
     print("\n" + text)
-    report = {"machine": header, "quick": args.quick, "scene": args.scene, "rows": results}
+    report = {"machine": machine, "quick": args.quick, "scene": args.scene, "rows": results}
+    if args.out:
+        write_report(args.out, text, report, echo=False)
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2))
+        atomic_write(args.json, json.dumps({"header": result_fields(), **report}, indent=2) + "\n")
     return report
 
 

@@ -2,6 +2,7 @@
 cost LE-only work would add to the periodic scene if it were not skipped.
 
     python experiments/benchmarks/model_cost/scene_cost.py [--frames 3] [--windows 5] [--repeats 3]
+        [--json out.json] [--out experiments/results/model_cost/scene_cost]
     python experiments/benchmarks/model_cost/scene_cost.py --quick   # tiny scene, fewer repetitions
 
 Three stages, each timed side by side in one process (the variants interleaved, best of
@@ -21,6 +22,8 @@ Three stages, each timed side by side in one process (the variants interleaved, 
 
 The LE-path variants must give the same numbers as the periodic ones (checked: positions to
 1e-12 of the box), so the difference is only the cost of work a periodic scene skips.
+``--out STEM`` writes ``STEM.md`` (the result header, then the printed tables) and
+``STEM.json``; ``--json`` the JSON alone (with the header's fields under ``header``).
 """
 
 from __future__ import annotations
@@ -37,7 +40,17 @@ import numpy as np
 import torch
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import fmt, load_yaml, machine_line, markdown_table, scene_dataset, set_threads  # noqa: E402
+from benchlib import (  # noqa: E402
+    atomic_write,
+    fmt,
+    load_yaml,
+    machine_line,
+    markdown_table,
+    result_fields,
+    scene_dataset,
+    set_threads,
+    write_report,
+)
 
 from gripdem.boundary import Boundary, LeesEdwards  # noqa: E402
 from gripdem.data.batch import collate_windows  # noqa: E402
@@ -301,7 +314,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="the JSON alone")
+    ap.add_argument("--out", type=Path, default=None, help="STEM: STEM.md and STEM.json")
     args = ap.parse_args(argv)
     set_threads(args.threads)
     preset = "tiny" if args.quick else "default"
@@ -310,7 +324,7 @@ def main(argv: list[str] | None = None) -> dict:
     )
     dem = bench_dem(preset, frames)
     data, model, difference = bench_pipeline(preset, windows, repeats)
-    header = machine_line()
+    machine = machine_line()
     cols = [
         "per window",
         "pbc (ms)",
@@ -321,7 +335,7 @@ def main(argv: list[str] | None = None) -> dict:
     ]
     text = "\n\n".join(
         [
-            f"{header}\n\npreset {preset}{' (QUICK)' if args.quick else ''}: DEM best of {frames} "
+            f"{machine}\n\npreset {preset}{' (QUICK)' if args.quick else ''}: DEM best of {frames} "
             f"frame(s) per variant; data and model best of {repeats} over {windows} windows "
             f"(history {HISTORY}, horizon {HORIZON})",
             markdown_table(["DEM variant", "ms / step", "/ pbc", "rebuilds / frame", "pairs"], dem),
@@ -339,8 +353,10 @@ def main(argv: list[str] | None = None) -> dict:
         "le_path_difference": difference,
         "text": text,
     }
+    if args.out:
+        write_report(args.out, text, report, echo=False)
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2))
+        atomic_write(args.json, json.dumps({"header": result_fields(), **report}, indent=2) + "\n")
     return report
 
 

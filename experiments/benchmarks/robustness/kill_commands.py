@@ -2,6 +2,7 @@
 
     python experiments/benchmarks/robustness/kill_commands.py [--kills 20] [--seed 0] [--strict]
         [--commands simulate run multirun predict handback convert] [--work DIR] [--keep]
+        [--out-dir experiments/results/test_suite] [--name kill_commands]
     python experiments/benchmarks/robustness/kill_commands.py --quick     # 3 kills of each command
 
 Each command runs on tiny data (the built-in ``preset=tiny``; ``experiment=smoke`` for
@@ -27,7 +28,8 @@ does not stop itself) or SIGINT (to the whole group: a terminal's Ctrl-C), in tu
 - **resume** (``run``): the resumed run's ``test/rmse`` against the uninterrupted reference
   run's; reported, and a failure only with ``--strict``.
 
-Writes ``<out-dir>/<name>.md`` (the table and every finding) and ``<name>.json``.
+Writes ``<out-dir>/<name>.md`` (the result header, then the table and every finding) and
+``<name>.json`` (the header's fields under ``header``).
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import machine_line, markdown_table  # noqa: E402
+from benchlib import machine_line, markdown_table, write_report  # noqa: E402
 from kill_checks import (  # noqa: E402
     EXIT_WAIT,
     MARKER,
@@ -286,7 +288,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--strict", action="store_true", help="fail on a resume mismatch too")
     parser.add_argument("--work", type=Path, help="working folder (default: a new temporary)")
     parser.add_argument("--keep", action="store_true", help="keep the working folder")
-    parser.add_argument("--out-dir", type=Path, default=Path("experiments/results"))
+    parser.add_argument("--out-dir", type=Path, default=Path("experiments/results/test_suite"))
     parser.add_argument("--name", default="kill_commands")
     args = parser.parse_args(argv)
     sizes = Sizes(sim_frames=120, epochs=15, predict_frames=30) if args.quick else Sizes()
@@ -336,10 +338,8 @@ def main(argv: list[str] | None = None) -> dict:
         ]
     )
     print("\n" + text)
-    args.out_dir.mkdir(parents=True, exist_ok=True)
-    (args.out_dir / f"{args.name}.md").write_text(text)
     report = {"durations": durations, "rows": rows, "reference": bench.reference}
-    (args.out_dir / f"{args.name}.json").write_text(json.dumps(report, indent=1, default=str))
+    write_report(args.out_dir / args.name, text, report, echo=False)
     failed = any(r[3] or r[4] for r in table) or any(r["next_rc"] != 0 for r in rows)
     if args.strict:
         failed |= any(r.get("resume_diff", 0.0) > RESUME_TOLERANCE for r in rows)

@@ -9,6 +9,7 @@ the whole default dataset (all its simulations, in worker processes).
         [--backend numba|torch --device cpu|cuda] [--no-full] [--dataset] [--json out.json]
 
 Timings depend on what else runs on the machine: the load average is printed with them.
+``--json`` writes the numbers with the result header's fields under ``header``.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from gripdem.dem.engine import Simulation
 from gripdem.dem.output import generate_dataset
 from gripdem.dem.packing import random_packing
 from gripdem.dem.scenes import initial_velocities, simulate_one
+from gripdem.provenance import atomic_write, result_fields
 
 CONF = Path(__file__).resolve().parents[3] / "conf"
 
@@ -146,7 +148,7 @@ def main(argv: list[str] | None = None) -> dict:
     out["load_after"] = os.getloadavg()
     print(f"\nload average after: {out['load_after']}")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=2))
+        atomic_write(args.json, json.dumps({"header": result_fields(), **out}, indent=2) + "\n")
     return out
 
 

@@ -3,7 +3,7 @@
     python experiments/benchmarks/surrogate/model_ab_speed.py \
         --model shipped=pretrained:pbc --model h20=outputs/.../best.safetensors \
         [--scene pbc] [--frames 60] [--repeats 8] [--threads 1] [--precision auto]
-        [--out experiments/results/NAME] [--quick]
+        [--out experiments/results/QUESTION/NAME] [--quick]
 
 The models roll out from the same observed frames of the scene's default dataset (its last
 simulation, the test simulation of the default protocol) through

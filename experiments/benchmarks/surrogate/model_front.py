@@ -1,7 +1,7 @@
 """The time-vs-error front of model sizes: which model gives which accuracy at which speed?
 
     python experiments/benchmarks/surrogate/model_front.py RUN_DIR... [--frames 60] [--threads 1 2]
-        [--links 10 1] [--out-dir experiments/results] [--name model_front]
+        [--links 10 1] [--out-dir experiments/results/model_cost] [--name model_front]
     python experiments/benchmarks/surrogate/model_front.py --quick   # two smoke models, tiny scene
 
 Every ``RUN_DIR`` is a ``python -m gripdem.run`` output directory of one configuration (width,
@@ -11,8 +11,9 @@ constant velocity and linear AR (out of sample, from ``metrics.json``), its trai
 number of weights, and the in-memory stepper's wall time per predicted frame on 2000 particles
 of the scene's test simulation, at every link length and thread count asked for (the stable
 setting: contact correction on), with the breakdown of the frame's time. The DEM's time per
-frame is measured in the same run. Writes ``NAME.md``, ``NAME.json`` and ``NAME.png`` (the
-front: milliseconds per frame against RMSE / CV).
+frame is measured in the same run. Writes ``NAME.md`` (the result header, then the table),
+``NAME.json`` (the rows, a list: the header is the Markdown file's) and ``NAME.png`` (the front:
+milliseconds per frame against RMSE / CV).
 """
 
 from __future__ import annotations
@@ -29,7 +30,15 @@ import numpy as np
 import torch
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import fmt, machine_line, markdown_table, set_threads, train_run  # noqa: E402
+from benchlib import (  # noqa: E402
+    atomic_write,
+    fmt,
+    machine_line,
+    markdown_table,
+    set_threads,
+    train_run,
+    write_result,
+)
 from surrogate_handback import dem_seconds_per_frame, generator_config  # noqa: E402
 
 from gripdem.data.dataset_io import read_meta  # noqa: E402
@@ -141,7 +150,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     parser.add_argument("--threads", type=int, nargs="+", default=[1])
     parser.add_argument("--links", type=int, nargs="+", default=[10, 1])
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--out-dir", type=Path, default=Path("experiments/results"))
+    parser.add_argument("--out-dir", type=Path, default=Path("experiments/results/model_cost"))
     parser.add_argument("--name", default="model_front")
     args = parser.parse_args(argv)
     runs = list(args.runs)
@@ -174,9 +183,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
         + [f"speed-up ({keys[0]})"]
     )
     markdown = f"machine: {machine_line()}\n\n" + markdown_table(headers, table) + "\n"
-    args.out_dir.mkdir(parents=True, exist_ok=True)
-    (args.out_dir / f"{args.name}.md").write_text(markdown)
-    (args.out_dir / f"{args.name}.json").write_text(json.dumps(rows, indent=1))
+    write_result(args.out_dir / f"{args.name}.md", markdown)
+    atomic_write(args.out_dir / f"{args.name}.json", json.dumps(rows, indent=1) + "\n")
     plot_front(rows, args.out_dir / f"{args.name}.png", keys[0])
     print(markdown)
     return rows

@@ -3,7 +3,8 @@
     python experiments/benchmarks/surrogate/surrogate_rollout.py \
         --checkpoint pbc=RUN/checkpoints/best.ckpt \
         lebc=RUN/checkpoints/best.ckpt [--frames 2000] [--block 100] [--threads 1]
-        [--link L] [--no-correction] [--out-dir experiments/results] [--name surrogate_rollout]
+        [--link L] [--no-correction] [--out-dir experiments/results/long_rollouts]
+        [--name surrogate_rollout]
     # an ensemble beside the point model
     python experiments/benchmarks/surrogate/surrogate_rollout.py \
         --checkpoint pbc=ENS.safetensors --members 8 --seed 0 --reference pbc=pretrained:pbc
@@ -319,7 +320,7 @@ def main(argv: list[str] | None = None) -> dict:
     )
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--out-dir", type=Path, default=Path("experiments/results"))
+    parser.add_argument("--out-dir", type=Path, default=Path("experiments/results/long_rollouts"))
     parser.add_argument("--name", default="surrogate_rollout")
     args = parser.parse_args(argv)
     set_threads(args.threads)

@@ -3,6 +3,7 @@
     python experiments/benchmarks/surrogate/surrogate_speed.py [--checkpoint pbc=pretrained:pbc
         lebc=...] [--scenes pbc lebc] [--sizes 2000 8000 32000 64000] [--dem-frames 2]
         [--threads 1] [--precision auto] [--no-lammps] [--memory-budget-gb 8] [--json out.json]
+        [--out experiments/results/surrogate_speed/surrogate_speed]
     python experiments/benchmarks/surrogate/surrogate_speed.py --quick
         # tiny scene, 400 and 1600 particles
 
@@ -35,7 +36,9 @@ side in one process:
 Peak resident memory of the model's prediction is measured; a size whose estimate (the
 smallest size's peak scaled with the particle count) exceeds ``--memory-budget-gb`` is
 skipped. ``--threads`` sets the model's torch threads and LAMMPS's OpenMP threads (default 1:
-a like-for-like comparison on one core each).
+a like-for-like comparison on one core each). ``--out STEM`` writes ``STEM.md`` (the result
+header, then the printed tables) and ``STEM.json``; ``--json`` the JSON alone (with the header's
+fields under ``header``).
 """
 
 from __future__ import annotations
@@ -54,12 +57,15 @@ sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it add
 from benchlib import (  # noqa: E402
     GIB,
     PeakMemory,
+    atomic_write,
     fmt,
     machine_line,
     markdown_table,
+    result_fields,
     scene_dataset,
     set_threads,
     tile_frames,
+    write_report,
 )
 
 from gripdem.data.dataset_io import read_meta, write_dataset  # noqa: E402
@@ -257,7 +263,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--no-lammps", action="store_true", help="time the built-in DEM only")
     ap.add_argument("--memory-budget-gb", type=float, default=8.0)
     ap.add_argument("--quick", action="store_true", help="tiny scene, 400 and 1600 particles")
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="the JSON alone")
+    ap.add_argument("--out", type=Path, default=None, help="STEM: STEM.md and STEM.json")
     args = ap.parse_args(argv)
     set_threads(args.threads)
     preset = "tiny" if args.quick else "default"
@@ -359,12 +366,15 @@ def main(argv: list[str] | None = None) -> dict:
         report["scenes"].append(
             {"scene": scene, "model": label, "table": text, "accuracy_over_cv": accuracy}
         )
-    header = machine_line()
-    print("\n" + header + "\n")
-    print("\n\n".join(tables))
-    report["machine"] = header
+    machine = machine_line()
+    text = machine + "\n\n" + "\n\n".join(tables)
+    print("\n" + text)
+    report["machine"] = machine
+    if args.out:
+        write_report(args.out, text, report, echo=False)
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2, default=str))
+        payload = {"header": result_fields(), **report}
+        atomic_write(args.json, json.dumps(payload, indent=2, default=str) + "\n")
     return report
 
 

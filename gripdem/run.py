@@ -10,7 +10,9 @@ under the job's output directory and returns ``optimized_metric`` for sweepers (
 
 A bad option or bad data ends the run with one line ``error: ...`` (exit status 1), Ctrl-C with
 one line saying what the output directory keeps (status 130); ``GRIPDEM_TRACEBACK=1`` adds the
-traceback (:func:`gripdem.runner.console.run_command`).
+traceback (:func:`gripdem.runner.console.run_command`). An option name removed in gripdem 0.2.0
+(``experiment=fast``, ...) is refused in one line naming its replacement before Hydra composes
+anything (:mod:`gripdem.runner.renamed_options`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from omegaconf import DictConfig
 from gripdem.config_files import config_dir
 from gripdem.runner.config_schema import given_data_path, register
 from gripdem.runner.console import run_hydra_command, single_run_errors
+from gripdem.runner.renamed_options import refuse_removed_names
 
 CONFIG_DIR = str(config_dir())  # gripdem/conf: the source tree's conf/, or a wheel's copy
 register()
@@ -70,5 +73,13 @@ def kept() -> str:
     return f"kept in {out} (complete files only): {shown or 'nothing'}{resume}"
 
 
+def command() -> None:
+    """The command: its command line's removed option names refused (one line, nothing
+    written; Hydra would answer a removed config file with a long message of its own), then
+    :func:`main`."""
+    refuse_removed_names(sys.argv[1:])
+    main()
+
+
 if __name__ == "__main__":
-    sys.exit(run_hydra_command("gripdem.run", main, kept))
+    sys.exit(run_hydra_command("gripdem.run", command, kept))

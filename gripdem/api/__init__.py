@@ -3,13 +3,13 @@
     import gripdem
     model = gripdem.load_model("pretrained:lebc")
     data = gripdem.generate("lebc", preset="tiny", sims=1)
-    run = model.rollout(data.positions[0], data.times[0], frames=100)
+    run = model.rollout(data.positions[0], data.times[0], frames=100, scene=data.scene)
     print(gripdem.physics(run.trajectory()).table())
 
-Stability: every name in ``__all__`` keeps its meaning and signature within a major version.
-A name that changes is first kept as a deprecated alias for at least one minor release: it
-still works, warns with a ``DeprecationWarning`` naming its replacement, and is listed in
-``DEPRECATED``. ``import gripdem`` and ``import gripdem.api`` import neither torch nor the
+Stability: a name in ``__all__`` that changes is first kept as a deprecated alias for one minor
+release: it still works, warns with a ``DeprecationWarning`` naming its replacement, and is
+listed in ``DEPRECATED``; the next minor release removes it (before 1.0; from 1.0, the next
+major release). ``import gripdem`` and ``import gripdem.api`` import neither torch nor the
 model code; that happens when a model is loaded or a simulation runs.
 """
 
@@ -21,9 +21,11 @@ from typing import Any
 
 from gripdem.api.coupling import Surrogate
 from gripdem.api.dem_physics import generate, physics
-from gripdem.api.model import TRAINING, Model, load_model
+from gripdem.api.loading import load_model
+from gripdem.api.model import TRAINING, Model
 from gripdem.api.rollout_result import RolloutError, RolloutResult
-from gripdem.api.scene import Scene, Trajectory, read_trajectory, write_trajectory
+from gripdem.api.scene import Scene
+from gripdem.api.trajectory import Trajectory, read_trajectory, write_trajectory
 from gripdem.errors import (  # the exceptions: one base, GripdemError
     CheckpointError,
     DatasetError,

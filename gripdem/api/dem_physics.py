@@ -4,11 +4,14 @@ trajectory."""
 from __future__ import annotations
 
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from gripdem.api.scene import Trajectory
+from gripdem.api.trajectory import Trajectory
 from gripdem.config_files import config_dir
 from gripdem.errors import GenerationError
+
+if TYPE_CHECKING:
+    from gripdem.evaluation.trajectory_physics import TrajectoryPhysics
 
 #: validation checks that say whether data suits training, not whether the physics is sound: a
 #: warning here (a short single simulation may have no Lees-Edwards face crossing)
@@ -70,6 +73,25 @@ def generate(
         ValueError: an unknown scene or preset (the known ones listed), or an option the
             generator refuses (named: e.g. a volume fraction above random close packing).
         GenerationError: ``validate`` and the data failed a plausibility check (named).
+
+    Examples:
+        A small sheared scene: one simulation of 300 particles, 21 frames (the box follows
+        from the particle count at the scene's volume fraction):
+
+        >>> import gripdem
+        >>> data = gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)
+        >>> data.positions.shape, data.times.shape
+        ((1, 21, 300, 3), (1, 21))
+        >>> data.scene.boundary, data.scene.shear_rate, data.scene.diameter
+        ('lees_edwards', 1000.0, 2.5e-06)
+        >>> data.velocities.shape
+        (1, 21, 300, 3)
+        >>> data.provenance["generator"], data.provenance["parameters"]["seed"]
+        ('gripdem.dem', 0)
+        >>> gripdem.generate("walls")
+        Traceback (most recent call last):
+            ...
+        ValueError: scene 'walls': no .../walls.yaml; expected one of ['lebc', 'pbc']
     """
     from gripdem.dem.config import GeneratorConfig
     from gripdem.dem.scenes import generate
@@ -113,14 +135,47 @@ def physics(
     *,
     lags: list[int] | None = None,
     structure_frames: int = 10,
-):
+) -> TrajectoryPhysics:
     """The physics of simulation ``sim`` of ``trajectory``: g(r), contact coordination,
     overlaps, the mean-flow profile, the MSD and non-affine MSD against the lag and (from 1000
     frames) the self-diffusion coefficients; a
     ``PhysicsReport`` (``.table()`` prints it).
 
+    The same definitions as the rollout statistics, so a DEM trajectory and a rollout
+    (``RolloutResult.trajectory()``) are reported alike.
+
+    Args:
+        trajectory: any ``Trajectory``: generated, read from a file or rolled out.
+        sim: which simulation of it.
+        lags: of the MSD, in frames (default 1, 2, 5, 10, 20, ... up to half the frames).
+        structure_frames: frames, spread evenly over the trajectory, over which g(r),
+            coordination and overlaps are averaged.
+
+    Returns:
+        a ``PhysicsReport``: arrays in numpy, lengths in particle diameters.
+
     Raises:
-        ValueError: ``sim`` outside the trajectory, or lags longer than it."""
+        ValueError: ``sim`` outside the trajectory, or lags longer than it.
+
+    Examples:
+        The physics of a small sheared scene of the built-in DEM:
+
+        >>> import gripdem
+        >>> data = gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)
+        >>> report = gripdem.physics(data)
+        >>> report.frames, report.particles, report.profile_kind
+        (21, 300, 'linear')
+        >>> 0.95 < report.peak_over_d < 1.05  # g(r) peaks at contact, r = d
+        True
+        >>> abs(report.profile[0] / data.scene.shear_rate - 1) < 0.1  # the imposed shear
+        True
+        >>> report.lags.tolist()
+        [1, 2, 5, 10]
+        >>> gripdem.physics(data, sim=1)
+        Traceback (most recent call last):
+            ...
+        ValueError: sim 1: the trajectory holds simulations 0..0
+    """
     from gripdem.evaluation.trajectory_physics import trajectory_physics
 
     if not 0 <= sim < trajectory.n_sims:

@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from gripdem.api.scene import Scene, Trajectory, write_trajectory
+from gripdem.api.scene import Scene
+from gripdem.api.trajectory import Trajectory, write_trajectory
 
 
 @dataclass
@@ -35,6 +36,22 @@ class RolloutResult:
         precision: the encoder's arithmetic used.
         notes: what differs between the scene and the model's training scene.
         model: what the model was loaded from.
+
+    Examples:
+        Roll the shipped Lees-Edwards model out over a small sheared scene of the built-in
+        DEM: the 11 observed frames, then 10 predicted ones:
+
+        >>> import gripdem
+        >>> model = gripdem.load_model("pretrained:lebc")
+        >>> data = gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)
+        >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+        ...                        scene=data.scene)
+        >>> result.positions.shape, result.times.shape, result.n_observed
+        ((21, 300, 3), (21,), 11)
+        >>> result.divergence["stopped"] is None  # it did not stop early
+        True
+        >>> result.correction["overlapping_after"]  # no overlap left after each correction
+        [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
     """
 
     positions: np.ndarray
@@ -51,24 +68,88 @@ class RolloutResult:
 
     @property
     def predicted(self) -> np.ndarray:
-        """The predicted frames only: ``(*batch, n_predicted, N, 3)``."""
+        """The predicted frames only: ``(*batch, n_predicted, N, 3)``.
+
+        Returns:
+            a view of ``positions`` after the ``n_observed`` observed frames.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``Model`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> result.predicted.shape
+            (10, 300, 3)
+            >>> bool((result.predicted == result.positions[11:]).all())
+            True
+        """
         return self.positions[..., self.n_observed :, :, :]
 
     @property
     def n_predicted(self) -> int:
         """Frames predicted (fewer than asked only in the ``partial`` of a
-        ``RolloutDiverged``)."""
+        ``RolloutDiverged``).
+
+        Returns:
+            the number of predicted frames.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``Model`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> result.n_predicted
+            10
+        """
         return self.positions.shape[-3] - self.n_observed
 
     @property
     def seconds_per_frame(self) -> float:
-        """Wall time of the stepper per predicted frame (all simulations together)."""
+        """Wall time of the stepper per predicted frame (all simulations together).
+
+        Returns:
+            seconds per frame: the sum of ``timings`` over ``n_predicted``.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``Model`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> result.seconds_per_frame > 0
+            True
+            >>> sorted(result.timings)
+            ['correction', 'decode_wrap', 'features', 'forward', 'neighbour_list', 'relaxation']
+        """
         return sum(self.timings.values()) / max(self.n_predicted, 1)
 
     def trajectory(self) -> Trajectory:
         """The rollout as a ``Trajectory`` (rows: simulation-major, then members), to
         write with ``gripdem.write_trajectory`` or to report with ``gripdem.physics``. Raises
-        nothing of its own."""
+        nothing of its own.
+
+        Returns:
+            a ``Trajectory`` of the observed and predicted frames, one row per simulation and
+            member; its provenance names the model and the observed frame count.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``Model`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> trajectory = result.trajectory()
+            >>> trajectory.positions.shape, trajectory.provenance["observed_frames"]
+            ((1, 21, 300, 3), 11)
+            >>> gripdem.physics(trajectory).frames
+            21
+        """
         n, t = self.positions.shape[-2], self.positions.shape[-3]
         return Trajectory(
             self.positions.reshape(-1, t, n, 3),
@@ -89,9 +170,29 @@ class RolloutResult:
         ``data.path=``); its provenance names the model, the observed frame count and the
         notes. Validated first, written atomically; returns the path.
 
+        Args:
+            path: where to write (``.h5``).
+            overwrite: replace an existing file.
+
+        Returns:
+            ``path`` as a ``pathlib.Path``.
+
         Raises:
             FileExistsError: ``path`` exists and ``overwrite`` is False (nothing written).
-            DatasetError: the frames cannot form a valid dataset (named field)."""
+            DatasetError: the frames cannot form a valid dataset (named field).
+
+        Examples:
+            ``model`` and ``data`` are those of the ``Model`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> path = result.save("rollout.h5")
+            >>> back = gripdem.read_trajectory(path)
+            >>> back.n_frames, back.provenance["model"]
+            (21, 'pretrained:lebc')
+        """
         return write_trajectory(path, self.trajectory(), overwrite=overwrite)
 
     def error(self, truth: np.ndarray) -> RolloutError:
@@ -109,7 +210,25 @@ class RolloutResult:
             and the errors pooled (a member's RMSE, not the ensemble mean's).
 
         Raises:
-            ValueError: ``truth`` of another shape, or with NaN/Inf."""
+            ValueError: ``truth`` of another shape, or with NaN/Inf.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``Model`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> error = result.error(data.positions[0, 11:])
+            >>> error.per_frame_over_d.shape
+            (10,)
+            >>> error.ratio_to_constant_velocity < 1  # better than constant velocity
+            True
+            >>> result.error(data.positions[0, 11:15])
+            Traceback (most recent call last):
+                ...
+            ValueError: truth: expected (10, 300, 3) (the predicted frames), got (4, 300, 3)
+        """
         from gripdem.evaluation.metrics import position_residuals, rmse_per_step
         from gripdem.models.baselines import constant_velocity
 
@@ -152,6 +271,23 @@ class RolloutError:
         per_frame_over_d: ``(n_predicted,)`` RMSE / d at each predicted frame.
         constant_velocity_per_frame_over_d: ``(n_predicted,)`` constant velocity's.
         members: ensemble members pooled (1: a deterministic rollout).
+
+    Examples:
+        Score a rollout of the shipped Lees-Edwards model over a small sheared scene of the
+        built-in DEM against the DEM's own frames:
+
+        >>> import gripdem
+        >>> model = gripdem.load_model("pretrained:lebc")
+        >>> data = gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)
+        >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+        ...                        scene=data.scene)
+        >>> error = result.error(data.positions[0, 11:])
+        >>> error.per_frame_over_d.shape, error.members
+        ((10,), 1)
+        >>> bool((error.per_frame_over_d[1:] > error.per_frame_over_d[:-1]).all())  # it grows
+        True
+        >>> error.rmse_over_d < error.constant_velocity_rmse_over_d
+        True
     """
 
     per_frame_over_d: np.ndarray
@@ -160,15 +296,61 @@ class RolloutError:
 
     @property
     def rmse_over_d(self) -> float:
-        """RMSE / d over all predicted frames (root of the mean squared error)."""
+        """RMSE / d over all predicted frames (root of the mean squared error).
+
+        Returns:
+            the RMSE in particle diameters.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``RolloutError`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> error = result.error(data.positions[0, 11:])
+            >>> 0 < error.rmse_over_d < 0.1  # a small fraction of a diameter
+            True
+        """
         return float(np.sqrt(np.mean(self.per_frame_over_d**2)))
 
     @property
     def constant_velocity_rmse_over_d(self) -> float:
-        """Constant velocity's RMSE / d over the same frames."""
+        """Constant velocity's RMSE / d over the same frames.
+
+        Returns:
+            the RMSE in particle diameters of positions extrapolated at the last observed
+            velocity.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``RolloutError`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> error = result.error(data.positions[0, 11:])
+            >>> error.constant_velocity_rmse_over_d > error.rmse_over_d
+            True
+        """
         return float(np.sqrt(np.mean(self.constant_velocity_per_frame_over_d**2)))
 
     @property
     def ratio_to_constant_velocity(self) -> float:
-        """``rmse_over_d / constant_velocity_rmse_over_d``: below 1, the model beats it."""
+        """``rmse_over_d / constant_velocity_rmse_over_d``: below 1, the model beats it.
+
+        Returns:
+            the ratio of the two RMSEs.
+
+        Examples:
+            ``model`` and ``data`` are those of the ``RolloutError`` example
+            (``gripdem.load_model("pretrained:lebc")`` and ``gripdem.generate("lebc", "tiny",
+            sims=1, particles=300, frames=21)``):
+
+            >>> result = model.rollout(data.positions[0, :11], data.times[0, :11], frames=10,
+            ...                        scene=data.scene)
+            >>> error = result.error(data.positions[0, 11:])
+            >>> 0 < error.ratio_to_constant_velocity < 1
+            True
+        """
         return self.rmse_over_d / self.constant_velocity_rmse_over_d

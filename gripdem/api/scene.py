@@ -1,4 +1,5 @@
-"""Scenes and trajectories held in memory: the data types of the Python API.
+"""Scenes held in memory: the periodic or Lees-Edwards unit cell of the Python API
+(trajectories: ``gripdem.api.trajectory``).
 
 Nothing here imports torch; ``gripdem.boundary`` (which does) is imported when a method
 needs the boundary math.
@@ -8,8 +9,7 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,7 +17,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from gripdem.boundary import Boundary
-    from gripdem.data.schema import DatasetMeta, TrajectoryData
+    from gripdem.data.schema import DatasetMeta
 
 BOUNDARIES = ("periodic", "lees_edwards")
 #: where a scene's numbers may differ and still describe the same scene (relative)
@@ -36,7 +36,7 @@ def _positive(name: str, value: Any) -> float:
 
 @dataclass(frozen=True)
 class Scene:
-    """A periodic unit cell and its particles, described in memory (SI units).
+    """A periodic or Lees-Edwards unit cell and its particles, described in memory (SI units).
 
     Args:
         box: ``(lx, ly, lz)`` in metres; the box is centred at the origin and positions lie in
@@ -50,9 +50,34 @@ class Scene:
         le_time_origin: the time (s) at which the Lees-Edwards offset delta is 0.
         body_force_amplitude: ``a`` in ``a_z(x) = a cos(2 pi x / lx)``, m/s² (0: none).
 
-    Example:
-        ``Scene(box=(3.2e-5,) * 3, diameter=2.5e-6, frame_interval=5e-6,
-        boundary="lees_edwards", shear_rate=1000.0)``
+    Raises:
+        ValueError: a number out of range or a boundary that is not one of the two (the
+            field named), a Lees-Edwards scene without a shear rate, or a periodic one with.
+
+    Examples:
+        A sheared cell of 2.5 µm particles; frozen, compared by value, usable as a dict key:
+
+        >>> import gripdem
+        >>> scene = gripdem.Scene(
+        ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+        ...     boundary="lees_edwards", shear_rate=1000.0,
+        ... )
+        >>> scene.boundary, scene.shear_rate
+        ('lees_edwards', 1000.0)
+        >>> scene.times(3)
+        array([0.e+00, 5.e-06, 1.e-05])
+
+        Every number is checked when the scene is made:
+
+        >>> gripdem.Scene(box=(3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6)
+        Traceback (most recent call last):
+            ...
+        ValueError: Scene.box: expected 3 positive lengths (lx, ly, lz), got (3.2e-05, 3.2e-05)
+        >>> scene.with_(shear_rate=0.0)
+        Traceback (most recent call last):
+            ...
+        ValueError: Scene.shear_rate: a lees_edwards scene needs a positive shear rate (1/s),
+        got 0.0 (the flow direction is le_sign)
     """
 
     box: tuple[float, float, float]
@@ -107,8 +132,30 @@ class Scene:
     ) -> Scene:
         """The scene of a ``gripdem.boundary.Boundary`` and the particles' numbers.
 
+        Args:
+            boundary: the cell: box and, for a sheared one, its Lees-Edwards parameters.
+            diameter: particle diameter, m.
+            frame_interval: seconds between two frames.
+            body_force_amplitude: ``a`` in ``a_z(x) = a cos(2 pi x / lx)``, m/s² (0: none).
+
+        Returns:
+            a ``Scene``.
+
         Raises:
-            ValueError: a number the scene refuses (named)."""
+            ValueError: a number the scene refuses (named).
+
+        Examples:
+            The inverse of ``to_boundary``:
+
+            >>> import gripdem
+            >>> scene = gripdem.Scene(
+            ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+            ...     boundary="lees_edwards", shear_rate=1000.0,
+            ... )
+            >>> boundary = scene.to_boundary()
+            >>> gripdem.Scene.from_boundary(boundary, 2.5e-6, 5e-6) == scene
+            True
+        """
         attrs = boundary.to_attrs()
         return cls(
             box=tuple(float(v) for v in attrs["box"]),
@@ -126,9 +173,30 @@ class Scene:
         """The scene of a gripdem HDF5 dataset (its attributes; the frame interval from its
         times), checked as every reader checks it.
 
+        The positions are checked (streamed in blocks) but not kept in memory.
+
+        Args:
+            path: a gripdem HDF5 dataset (``.h5``).
+
+        Returns:
+            the ``Scene`` that ``read_trajectory`` and ``gripdem.predict`` apply a model in.
+
         Raises:
             FileNotFoundError: no such file.
-            DatasetError: a missing or bad field (named)."""
+            DatasetError: a missing or bad field (named).
+
+        Examples:
+            ``data`` is the small sheared scene of the ``Model`` example
+            (``gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)``):
+
+            >>> path = gripdem.write_trajectory("sheared.h5", data)
+            >>> gripdem.Scene.from_file(path).matches(data.scene)
+            True
+            >>> gripdem.Scene.from_file("missing.h5")
+            Traceback (most recent call last):
+                ...
+            FileNotFoundError: missing.h5: no such dataset file
+        """
         from gripdem.data.dataset_io import read_meta
 
         return cls._from_meta(read_meta(path))
@@ -148,7 +216,21 @@ class Scene:
 
     def to_boundary(self) -> Boundary:
         """The ``gripdem.boundary.Boundary`` of this scene (box and Lees-Edwards): the
-        conventions package (minimum image, wrapping, offsets). Raises nothing of its own."""
+        conventions package (minimum image, wrapping, offsets). Raises nothing of its own.
+
+        Returns:
+            a ``gripdem.boundary.Boundary`` (``gripdem.boundary`` imports torch).
+
+        Examples:
+            >>> import gripdem
+            >>> scene = gripdem.Scene(
+            ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+            ...     boundary="lees_edwards", shear_rate=1000.0,
+            ... )
+            >>> boundary = scene.to_boundary()
+            >>> boundary.kind, boundary.is_lees_edwards
+            ('lees_edwards', True)
+        """
         from gripdem.boundary import Boundary, Box, LeesEdwards
 
         box = Box(*self.box)
@@ -175,7 +257,28 @@ class Scene:
 
     def matches(self, other: Scene, rtol: float = SAME_SCENE_RTOL) -> bool:
         """Whether ``other`` describes the same scene (every number within ``rtol``). Raises
-        nothing of its own."""
+        nothing of its own.
+
+        Args:
+            other: another ``Scene``.
+            rtol: relative tolerance on each number (the boundary must be equal).
+
+        Returns:
+            True when every field agrees.
+
+        Examples:
+            A frame interval read back from a file's times differs in its last digits:
+
+            >>> import gripdem
+            >>> scene = gripdem.Scene(
+            ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+            ...     boundary="lees_edwards", shear_rate=1000.0,
+            ... )
+            >>> scene.matches(scene.with_(frame_interval=5e-6 * (1 + 1e-12)))
+            True
+            >>> scene.matches(scene.with_(shear_rate=500.0))
+            False
+        """
         for f in fields(self):
             a, b = getattr(self, f.name), getattr(other, f.name)
             if isinstance(a, str):
@@ -187,202 +290,75 @@ class Scene:
 
     def offsets(self, times: np.ndarray) -> np.ndarray:
         """The float64 Lees-Edwards offsets delta (m) at ``times`` (zeros if periodic), from
-        the absolute times (docs/spec/conventions.md#le-offset). Raises nothing of its own."""
+        the absolute times (docs/spec/conventions.md#le-offset). Raises nothing of its own.
+
+        Args:
+            times: absolute times (s), any shape.
+
+        Returns:
+            the offsets, m, float64, shaped like ``times``.
+
+        Examples:
+            The image across the +x face slides by ``shear_rate * lx`` per second:
+
+            >>> import gripdem
+            >>> scene = gripdem.Scene(
+            ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+            ...     boundary="lees_edwards", shear_rate=1000.0,
+            ... )
+            >>> scene.offsets(scene.times(3)) / scene.diameter
+            array([0.   , 0.064, 0.128])
+        """
         return self.to_boundary().offset(np.asarray(times, dtype=np.float64))
 
     def times(self, frames: int, start: float = 0.0) -> np.ndarray:
         """``(frames,)`` equidistant frame times from ``start`` (s), float64. Raises nothing
-        of its own."""
+        of its own.
+
+        Args:
+            frames: how many times.
+            start: the first time, s.
+
+        Returns:
+            ``start + frame_interval * [0, 1, ..., frames - 1]``, float64.
+
+        Examples:
+            >>> import gripdem
+            >>> scene = gripdem.Scene(
+            ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+            ...     boundary="lees_edwards", shear_rate=1000.0,
+            ... )
+            >>> scene.times(3)
+            array([0.e+00, 5.e-06, 1.e-05])
+            >>> scene.times(100, start=1e-4).shape
+            (100,)
+        """
         return float(start) + self.frame_interval * np.arange(int(frames), dtype=np.float64)
 
     def with_(self, **changes: Any) -> Scene:
         """A copy with some numbers changed (checked again).
 
+        Args:
+            **changes: fields of ``Scene`` and their new values.
+
+        Returns:
+            a new ``Scene`` (this one is frozen and stays as it is).
+
         Raises:
-            ValueError: a changed number the scene refuses (named)."""
+            ValueError: a changed number the scene refuses (named).
+            TypeError: a name that is not a field of ``Scene``.
+
+        Examples:
+            >>> import gripdem
+            >>> scene = gripdem.Scene(
+            ...     box=(3.2e-5, 3.2e-5, 3.2e-5), diameter=2.5e-6, frame_interval=5e-6,
+            ...     boundary="lees_edwards", shear_rate=1000.0,
+            ... )
+            >>> scene.with_(shear_rate=500.0).shear_rate
+            500.0
+            >>> scene.with_(diameter=-1.0)
+            Traceback (most recent call last):
+                ...
+            ValueError: Scene.diameter: expected a positive finite number, got -1.0
+        """
         return replace(self, **changes)
-
-
-@dataclass
-class Trajectory:
-    """Trajectories of one scene held in memory.
-
-    Attributes:
-        positions: ``(sims, frames, particles, 3)`` wrapped positions, m, float64.
-        times: ``(sims, frames)`` absolute frame times, s, float64.
-        scene: the ``Scene``.
-        velocities: optional ``(sims, frames, particles, 3)``, m/s.
-        provenance: what made the data (generator and its parameters, or importer).
-    """
-
-    positions: np.ndarray
-    times: np.ndarray
-    scene: Scene
-    velocities: np.ndarray | None = None
-    provenance: dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        self.positions = np.asarray(self.positions, dtype=np.float64)
-        self.times = np.asarray(self.times, dtype=np.float64)
-        if self.positions.ndim == 3:  # one simulation
-            self.positions = self.positions[None]
-        if self.times.ndim == 1:
-            self.times = self.times[None]
-        if self.positions.ndim != 4 or self.positions.shape[-1] != 3:
-            raise ValueError(
-                f"Trajectory.positions: expected (sims, frames, particles, 3), got "
-                f"{self.positions.shape}"
-            )
-        if self.times.shape != self.positions.shape[:2]:
-            raise ValueError(
-                f"Trajectory.times: expected {self.positions.shape[:2]} (sims, frames), got "
-                f"{self.times.shape}"
-            )
-        if self.velocities is not None:
-            self.velocities = np.asarray(self.velocities, dtype=np.float64)
-
-    @property
-    def n_sims(self) -> int:
-        """Simulations held."""
-        return self.positions.shape[0]
-
-    @property
-    def n_frames(self) -> int:
-        """Frames per simulation."""
-        return self.positions.shape[1]
-
-    @property
-    def n_particles(self) -> int:
-        """Particles per frame."""
-        return self.positions.shape[2]
-
-    @classmethod
-    def _from_data(cls, data: TrajectoryData, scene: Scene | None = None) -> Trajectory:
-        """From the in-memory form of the HDF5 format
-        (``gripdem.data.schema.TrajectoryData``); ``scene`` default: its own, with the
-        frame interval a file reader takes (the median step, checked equidistant)."""
-        if scene is None:
-            from gripdem.data.schema import validate_times
-
-            interval = validate_times(None, data.times)
-            scene = Scene.from_boundary(
-                data.boundary, data.diameter, interval, data.body_force_amplitude
-            )
-        return cls(data.positions, data.times, scene, data.velocities, dict(data.provenance))
-
-    def _to_data(self) -> TrajectoryData:
-        """The in-memory form of the HDF5 format."""
-        from gripdem.data.schema import TrajectoryData
-
-        return TrajectoryData(
-            positions=self.positions,
-            times=self.times,
-            boundary=self.scene.to_boundary(),
-            radius=0.5 * self.scene.diameter,
-            body_force_amplitude=self.scene.body_force_amplitude,
-            provenance=dict(self.provenance),
-            velocities=self.velocities,
-        )
-
-
-#: the release that removes the deprecated aliases below
-ALIASES_REMOVED_IN = "0.2.0"
-
-
-def _deprecated_alias(cls: type, name: str) -> None:
-    """Keep ``cls.name`` working for one release as an alias of the internal ``cls._name``
-    (it takes or returns internal types), warning with a ``DeprecationWarning``."""
-    internal = cls.__dict__[f"_{name}"]
-    kind = type(internal)
-    function = internal.__func__ if isinstance(internal, classmethod) else internal
-
-    def alias(*args, **kwargs):
-        warnings.warn(
-            f"{cls.__name__}.{name} is internal (it uses gripdem's internal types) and is "
-            f"deprecated: it will be removed in gripdem {ALIASES_REMOVED_IN}",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return function(*args, **kwargs)
-
-    alias.__name__ = name
-    alias.__doc__ = f"Deprecated (removed in {ALIASES_REMOVED_IN}): internal."
-    setattr(cls, name, kind(alias) if kind is classmethod else alias)
-
-
-for _name in ("from_meta", "to_meta", "from_model_scene"):
-    _deprecated_alias(Scene, _name)
-for _name in ("from_data", "to_data"):
-    _deprecated_alias(Trajectory, _name)
-
-
-def check_frames(
-    name: str, frames, times, scene: Scene, k1: int, particles: int | None = None
-) -> tuple[np.ndarray, np.ndarray, bool]:
-    """The last ``k1`` frames of one ``(frames, N, 3)`` or ``(S, frames, N, 3)`` array and their
-    times, checked as every entry point checks a history (``Model.rollout``,
-    ``Model.surrogate``, ``Surrogate.set_state``): ``(frames (S, k1, N, 3), times (S, k1),
-    single)``. ``times`` None: ``scene.times`` (0, dt, 2 dt, ...).
-
-    Raises:
-        ValueError: naming ``name``: the wrong shape or particle count, too few frames,
-            NaN/Inf, times of another shape or not one frame interval apart."""
-    from gripdem.data.schema import TIME_RTOL
-
-    positions = np.asarray(frames, dtype=np.float64)
-    single = positions.ndim == 3
-    if single:
-        positions = positions[None]
-    if positions.ndim != 4 or positions.shape[-1] != 3 or positions.shape[1] < k1:
-        raise ValueError(
-            f"{name}: expected (frames >= {k1}, particles, 3) or (sims, frames, particles, "
-            f"3) positions (the model reads {k1} frames), got {np.shape(frames)}"
-        )
-    if particles is not None and positions.shape[2] != particles:
-        raise ValueError(
-            f"{name}: expected {particles} particles (the surrogate's), got {positions.shape[2]}"
-        )
-    if not np.isfinite(positions).all():
-        raise ValueError(f"{name}: positions must be finite (NaN or Inf found)")
-    if times is None:
-        times = scene.times(positions.shape[1])
-    times = np.asarray(times, dtype=np.float64)
-    times = np.broadcast_to(times, positions.shape[:2]) if times.ndim == 1 else times
-    if times.shape != positions.shape[:2]:
-        raise ValueError(f"times: expected {positions.shape[:2]}, got {np.shape(times)}")
-    times = np.ascontiguousarray(times[:, -k1:])
-    steps = np.diff(times, axis=1)
-    if not np.isfinite(times).all() or not np.allclose(
-        steps, scene.frame_interval, rtol=TIME_RTOL, atol=0.0
-    ):
-        raise ValueError(
-            f"times: the last {k1} frames must be {scene.frame_interval:.6g} s apart (the "
-            f"scene's frame_interval), got steps {steps.min():.6g}..{steps.max():.6g} s"
-        )
-    return np.ascontiguousarray(positions[:, -k1:]), times, single
-
-
-def read_trajectory(path: str | os.PathLike) -> Trajectory:
-    """Read a gripdem HDF5 dataset into memory (checked: every bad field is a clear error).
-    Its scene is ``Scene.from_file``'s, the one ``gripdem.predict`` applies a model in.
-
-    Raises:
-        FileNotFoundError: no such file.
-        DatasetError: a missing or bad field (named, with what was expected)."""
-    from gripdem.data.dataset_io import read_dataset
-
-    return Trajectory._from_data(read_dataset(path), Scene.from_file(path))
-
-
-def write_trajectory(
-    path: str | os.PathLike, trajectory: Trajectory, overwrite: bool = False
-) -> Path:
-    """Write ``trajectory`` as a gripdem HDF5 dataset, validated first and written atomically
-    (an existing file is kept unless ``overwrite``); returns the path.
-
-    Raises:
-        FileExistsError: ``path`` exists and ``overwrite`` is False (nothing written).
-        DatasetError: the arrays cannot form a valid dataset (named field; nothing written)."""
-    from gripdem.data.dataset_io import write_dataset
-
-    return write_dataset(path, trajectory._to_data(), overwrite=overwrite)

@@ -30,8 +30,9 @@ from gripdem.data.windows import (
 )
 
 PROTOCOLS = ("sims", "time", "in_sample", "auto")
-#: former protocol names (``paper`` until gripdem 0.1: the word also names the paper's models,
-#: preset and claims): old -> new; the old name works until 0.2.0 and warns
+#: former protocol names (``paper`` before gripdem 0.1.0: the word also names the paper's models,
+#: preset and claims): old -> new. The option name was removed in 0.2.0 (the command line
+#: refuses it); a config or file saved before the rename is still read, with a warning
 RENAMED_PROTOCOLS = {"paper": "in_sample"}
 #: former option names of the window plan: old -> new (a config saved before the rename)
 RENAMED_PLAN_OPTIONS = {"paper_windows": "in_sample_windows"}
@@ -135,8 +136,8 @@ def current_protocol(protocol: str, warn: bool = True) -> str:
         import warnings
 
         warnings.warn(
-            f"protocol {protocol!r} is deprecated: use {new!r} (the old name goes in gripdem "
-            "0.2.0)",
+            f"protocol {protocol!r} was renamed {new!r} in gripdem 0.1.0: read as {new!r} (a "
+            "config saved before the rename)",
             DeprecationWarning,
             stacklevel=3,
         )

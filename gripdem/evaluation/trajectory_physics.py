@@ -59,7 +59,44 @@ class TrajectoryPhysics:
     profile in m/s (``A`` of the cosine, or the slope ``S`` in 1/s for Lees-Edwards);
     ``lags``: ``(L,)`` frames with ``msd_over_d2`` and ``non_affine_msd_over_d2`` ``(L,)``;
     ``diffusion``: ``(3,)`` d² per frame interval, None for fewer than
-    ``DIFFUSION_LAGS[1]`` frames."""
+    ``DIFFUSION_LAGS[1]`` frames.
+
+    It is ``gripdem.PhysicsReport``, made by ``gripdem.physics``.
+
+    Attributes:
+        frames: frames of the trajectory.
+        particles: particles per frame.
+        profile_kind: ``"cosine"`` (periodic scene) or ``"linear"`` (Lees-Edwards).
+        gr_r_over_d: ``(bins,)`` bin centres of g(r), in d.
+        gr: ``(bins,)`` the radial distribution function.
+        coordination: neighbours closer than 1.01 d per particle.
+        overlap_fraction: particles with a neighbour closer than 0.98 d.
+        profile_x_over_d: ``(16,)`` x bin centres of the velocity profile, in d.
+        profile_vz: ``(16,)`` mean z velocity per bin, m/s (NaN in an empty bin).
+        profile: ``(coefficient, drift)`` of the fitted imposed profile, m/s (the
+            coefficient is the slope in 1/s for Lees-Edwards).
+        lags: ``(L,)`` MSD lags, frames.
+        msd_over_d2: ``(L,)`` mean-squared displacement, d².
+        non_affine_msd_over_d2: ``(L,)`` the same with the fitted profile removed, d².
+        diffusion: ``(3,)`` self-diffusion per axis, d² per frame interval, or None.
+        notes: what could not be measured, and why.
+
+    Examples:
+        The report of a small sheared scene of the built-in DEM:
+
+        >>> import gripdem
+        >>> data = gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)
+        >>> report = gripdem.physics(data)
+        >>> type(report) is gripdem.PhysicsReport
+        True
+        >>> report.gr.shape == report.gr_r_over_d.shape, report.profile_vz.shape
+        (True, (16,))
+        >>> bool((report.non_affine_msd_over_d2 < report.msd_over_d2).all())  # flow removed
+        True
+        >>> report.diffusion is None, report.notes[0]
+        (True, 'self-diffusion needs 1000 frames (fit over lags (200, 1000)); this trajectory
+        has 20')
+    """
 
     frames: int
     particles: int
@@ -78,7 +115,25 @@ class TrajectoryPhysics:
     notes: list[str] = field(default_factory=list)
 
     def table(self) -> str:
-        """The scalars as a Markdown table."""
+        """The scalars as a Markdown table. Raises nothing of its own.
+
+        Returns:
+            the table, one row per quantity (``| quantity | value |``).
+
+        Examples:
+            ``data`` is the small sheared scene of the ``PhysicsReport`` example
+            (``gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)``):
+
+            >>> table = gripdem.physics(data).table()
+            >>> for line in table.splitlines()[:3]:
+            ...     print(line)
+            | quantity | value |
+            |---|---|
+            | frames x particles | 21 x 300 |
+            >>> [line.split(" | ")[0].strip("| ") for line in table.splitlines()[3:7]]
+            ['coordination (< 1.01 d)', 'overlap fraction (< 0.98 d)', 'g(r) peak (r / d)',
+             'mean flow slope S (1/s)']
+        """
         coefficient = "amplitude A (m/s)" if self.profile_kind == "cosine" else "slope S (1/s)"
         rows = [
             ("frames x particles", f"{self.frames} x {self.particles}"),
@@ -101,7 +156,19 @@ class TrajectoryPhysics:
 
     @property
     def peak_over_d(self) -> float:
-        """Where g(r) peaks, in diameters."""
+        """Where g(r) peaks, in diameters.
+
+        Returns:
+            the centre of g(r)'s highest bin, in d.
+
+        Examples:
+            ``data`` is the small sheared scene of the ``PhysicsReport`` example
+            (``gripdem.generate("lebc", "tiny", sims=1, particles=300, frames=21)``): its
+            particles touch, so g(r) peaks at one diameter:
+
+            >>> round(gripdem.physics(data).peak_over_d, 1)
+            1.0
+        """
         return float(self.gr_r_over_d[int(np.argmax(self.gr))])
 
 

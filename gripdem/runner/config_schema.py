@@ -6,6 +6,8 @@ command-line override while composing: an unknown key, a wrong type (``split.hor
 or a value outside a fixed set (``model.decoder_mode=gripp``) fails before anything runs,
 with a message naming the key and what was expected. Scene physics and preset sizes are
 checked by :class:`gripdem.dem.config.GeneratorConfig`; trainer arguments by Lightning.
+Option names removed in gripdem 0.2.0 (``model.fast_steps``, ``data.protocol=paper``, ...) are
+refused by name before Hydra composes (:mod:`gripdem.runner.renamed_options`).
 
 Scene x model specifics live in :func:`check_combination` (the one place for them).
 """
@@ -22,7 +24,6 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from gripdem.runner.config_checks import check_rollout_training, check_split_fits_the_preset
-from gripdem.runner.renamed_options import apply_deprecated_names
 
 log = logging.getLogger(__name__)
 
@@ -52,8 +53,6 @@ class TrainableGraph(Enum):
 class EncoderName(Enum):
     graph_conv = "graph_conv"
     contact = "contact"
-    # deprecated name of contact (until 0.2.0)
-    interaction = "interaction"
 
 
 class PositionFeatures(Enum):
@@ -93,8 +92,6 @@ class Protocol(Enum):
     time = "time"
     in_sample = "in_sample"
     auto = "auto"
-    # deprecated name of in_sample (until 0.2.0)
-    paper = "paper"
 
 
 @dataclass
@@ -154,8 +151,6 @@ class ModelSchema:
     n_heads: int = 2
     decoder_dropout: float = 0.0
     train_steps: int = 1820
-    # deprecated name of train_steps (until 0.2.0): when set, it replaces train_steps
-    fast_steps: Optional[int] = None
     lr: float = 1e-4
     weight_decay: float = 0.0
     lr_schedule: LrSchedule = LrSchedule.constant
@@ -196,8 +191,6 @@ class DataSchema:
     sims: dict[str, Optional[list[int]]] = field(default_factory=dict)
     simulations: Optional[list[int]] = None
     in_sample_windows: int = 1
-    # deprecated name of in_sample_windows (until 0.2.0): when set, it replaces it
-    paper_windows: Optional[int] = None
     history_len: Optional[int] = None
     train_stride: int = 1
     eval_stride: Optional[int] = None
@@ -294,7 +287,6 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
     works but is probably not meant (``notes=False``: checks only; the runner checks every
     job before it starts and again, with the notes, inside the job)."""
     if not notes:
-        apply_deprecated_names(cfg)  # its lines print once per process, notes or not
         previous = log.disabled
         log.disabled = True
         try:
@@ -302,7 +294,6 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
         finally:
             log.disabled = previous
         return
-    apply_deprecated_names(cfg)
     mode = str(cfg.model.decoder_mode.value)
     boundary = cfg.scene.get("boundary")
     if cfg.data.encoding != cfg.model.encoding:

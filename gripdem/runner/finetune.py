@@ -21,7 +21,7 @@ unless training beat it on the validation windows (:func:`keep_start_unless_beat
 has its own optimiser defaults (``finetune.lr``, ``finetune.warmup_fraction`` in
 ``conf/config.yaml``: a lower learning rate and a longer warm-up than training from scratch;
 :func:`apply_finetune_defaults`), chosen from the comparison in
-``experiments/results/finetune_defaults.md``.
+``experiments/results/fine_tuning/finetune_defaults.md``.
 """
 
 from __future__ import annotations
@@ -112,7 +112,8 @@ def apply_finetune_defaults(cfg: DictConfig) -> None:
     and ``finetune.max_steps`` (each unless null) in place of the model's own ``lr`` and
     ``warmup_fraction`` and the trainer's ``max_steps``: weights that
     already fit a scene are nudged, not retrained (measured: the from-scratch learning rate made
-    the shipped model worse on scenes unlike its own, experiments/results/finetune_defaults.md)."""
+    the shipped model worse on scenes unlike its own,
+    experiments/results/fine_tuning/finetune_defaults.md)."""
     if cfg.model.get("init_from") in (None, "") or cfg.get("finetune") is None:
         return
     with open_dict(cfg):

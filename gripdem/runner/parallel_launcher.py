@@ -2,8 +2,9 @@
 
 The default launcher of ``python -m gripdem.run -m ...`` (``hydra/launcher=parallel``; the
 Hydra plugin class is ``hydra_plugins.gripdem_launcher.ParallelLauncher``, which calls
-:func:`launch_jobs`). Measured on the 2-core machine with the mission's sweep
-(``experiments/results/mission_command.md``): two jobs with one torch thread each finish
+:func:`launch_jobs`). Measured on a 2-core AMD EPYC machine with the split sweep
+``python -m gripdem.run -m split=190-10,100-100 model=vct``
+(``experiments/results/split_sweep/split_sweep.md``): two jobs with one torch thread each finish
 sooner than the same jobs one after another with two threads, because a small model at batch
 size one keeps a second thread mostly idle.
 

@@ -10,10 +10,11 @@ anything runs or any folder is written.
   time from measured step rates (:data:`SECONDS_PER_STEP`), before the first job starts. Other
   sweepers (Optuna) choose their jobs as they go: only their trial count is printed.
 
-The estimate is for a 2-core CPU like the reference machine: it scales the measured seconds
+The estimate is for a 2-core CPU like the AMD EPYC it was measured on: it scales the measured
+seconds
 per optimiser step of each encoder/decoder kind by particles and history length, and adds each
 job's data, baseline and test time measured on the same machine
-(``experiments/results/mission_command.md``). A GPU or more cores run faster.
+(``experiments/results/split_sweep/split_sweep.md``). A GPU or more cores run faster.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from gripdem.runner.console import report_error
 log = logging.getLogger(__name__)
 
 #: seconds per optimiser step at 2000 particles, history_len 10, batch size 1, 2 threads on the
-#: reference 2-core machine (experiments/results/mission_command.md): (encoder, decoder) ->
+#: reference 2-core machine (experiments/results/split_sweep/split_sweep.md): (encoder, decoder) ->
 #: (base, per predicted frame of the model's horizon)
 SECONDS_PER_STEP = {
     ("contact", "direct"): (0.046, 0.0),
@@ -47,7 +48,7 @@ SECONDS_PER_STEP = {
 #: model.rollout.start of the budget) costs ``1 + c (L - 1)`` one-link steps, ``c`` by
 #: model.rollout.loss (each further link: a forward pass, the contact correction
 #: of its frames and, for ``all``, a backward pass; chained validation included), measured with
-#: two one-thread jobs side by side (experiments/results/rollout_training.md)
+#: two one-thread jobs side by side (experiments/results/rollout_training/rollout_training.md)
 ROLLOUT_LINK_COST = {"last": 0.65, "all": 1.1}
 #: seconds per job besides training at 2000 particles: loading, the AR fit, validation, the
 #: test and the outputs (per frame of the split's horizon: the chained test grows with it)
@@ -55,7 +56,7 @@ SECONDS_PER_JOB = (14.0, 0.02)
 #: seconds of the built-in DEM per simulation of 2000 particles (the default preset, 2 cores)
 DEM_SECONDS_PER_SIM = 30.0
 #: wall time of two one-thread jobs side by side over one two-thread job's, on 2 cores
-#: (experiments/results/mission_command.md)
+#: (experiments/results/split_sweep/split_sweep.md)
 PARALLEL_SLOWDOWN = 1.3
 
 
@@ -65,7 +66,8 @@ def _value(option: Any) -> str:
 
 
 def job_seconds(cfg: DictConfig) -> float:
-    """A rough estimate of one job's wall time on the reference machine (see module doc)."""
+    """A rough estimate of one job's wall time on the 2-core machine it was measured on (see
+    module doc)."""
     model = cfg.model
     kind = (_value(model.encoder.name), _value(model.decoder))
     if kind not in SECONDS_PER_STEP:
@@ -139,7 +141,7 @@ class SweepPlan(Callback):
             wall *= PARALLEL_SLOWDOWN if at_once > 1 else 1.0
             print(
                 f"sweep: {trials} trials chosen by the sweeper as it goes, {at_once} at a time, "
-                f"about {_minutes(wall)} on a 2-core CPU like the reference machine "
+                f"about {_minutes(wall)} on a 2-core CPU like the one it was measured on "
                 "(at the base config's size)",
                 flush=True,
             )
@@ -167,7 +169,7 @@ class SweepPlan(Callback):
             dem = f", plus about {minutes} to generate {len(missing)} dataset(s) first"
         print(
             f"sweep: {n} job{'s' if n != 1 else ''}, about {_minutes(wall)} ({how}) on a 2-core "
-            f"CPU like the reference machine{dem}",
+            f"CPU like the one it was measured on{dem}",
             flush=True,
         )
 

@@ -287,14 +287,19 @@ def test_the_scene_is_explicit(pbc_checkpoint, pbc_file):
     model = gripdem.load_model(pbc_checkpoint)
     data = gripdem.read_trajectory(pbc_file)
     history = data.positions[0, : model.history_len + 1]
-    with pytest.warns(DeprecationWarning, match=r"without scene=.*scene='training'"):
-        implicit = model.rollout(history, frames=2)
+    with pytest.raises(ValueError, match=r"needs scene= \(required since gripdem 0.2.0\)"):
+        model.rollout(history, frames=2)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         explicit = model.rollout(history, frames=2, scene=gripdem.TRAINING)
         model.surrogate(history, scene="training")
-    np.testing.assert_array_equal(implicit.positions, explicit.positions)
+    with pytest.raises(ValueError, match=r"Model.surrogate\(\) needs scene="):
+        model.surrogate(history)
     assert explicit.scene == model.scene
+    for cls, name in [(gripdem.Scene, n) for n in ("from_meta", "to_meta", "from_model_scene")] + [
+        (gripdem.Trajectory, n) for n in ("from_data", "to_data")
+    ]:
+        assert not hasattr(cls, name), f"{cls.__name__}.{name} was removed in 0.2.0"
     with pytest.raises(ValueError, match="scene: expected a Scene or 'training', got 'mine'"):
         model.rollout(history, frames=2, scene="mine")
 

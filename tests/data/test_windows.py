@@ -91,7 +91,7 @@ def test_in_sample_protocol_is_in_sample():
         2, 40, "10-5", "in_sample", train_stride=4, simulations=[0, 1], in_sample_windows=9
     )
     assert len(many.train) == 9 and many.train.sims == (0, 1)
-    with pytest.warns(DeprecationWarning, match="protocol 'paper' is deprecated: use 'in_sample'"):
+    with pytest.warns(DeprecationWarning, match="protocol 'paper' was renamed 'in_sample'"):
         old = plan_windows(1, 201, "190-10", "paper")  # the name before gripdem 0.1
     assert old.protocol == "in_sample" and list(old.test) == list(plan.test)
 

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
-from omegaconf import OmegaConf
 
 from gripdem.evaluation.tensorboard_runs import read_runs
 from gripdem.inference.model_file import read_model_file
@@ -25,7 +24,6 @@ GROUPS = {
     "split": ["190-10", "180-20", "150-50", "100-100", "10-5", "custom"],
     "model": [
         "contact",
-        "interaction",
         "ensemble",
         "grip",
         "pct",
@@ -36,7 +34,7 @@ GROUPS = {
         "vct_paper_exact",
     ],
     "trainer": ["cpu", "gpu", "ddp"],
-    "experiment": ["smoke", "default", "fast", "paper"],
+    "experiment": ["smoke", "default", "paper"],
     "hparams_search": ["optuna"],
     "hydra/launcher": ["local_parallel", "slurm"],
 }
@@ -274,59 +272,68 @@ def test_a_short_horizon_model_is_tested_chained_over_the_split(
     assert math.isfinite(metrics["test/rmse_ratio_constant_velocity"])
 
 
-#: every renamed option: (old overrides, the same run under the new names)
-RENAMES = {
-    "experiment=fast": (["experiment=fast"], ["experiment=default"]),
-    "model.fast_steps": (["model.fast_steps=7"], ["model.train_steps=7"]),
-    "model=interaction": (["model=interaction"], ["model=contact"]),
+#: every option name removed in gripdem 0.2.0: the command lines that use it (set, added,
+#: among a sweep's choices), and the same command under the new name
+REMOVED = {
+    "experiment=fast": (
+        [["experiment=fast"], ["-m", "experiment=smoke,fast"]],
+        ["experiment=default"],
+    ),
+    "model.fast_steps": (
+        [["model.fast_steps=100"], ["+model.fast_steps=100"], ["~model.fast_steps"]],
+        ["model.train_steps=100"],
+    ),
+    "model=interaction": (
+        [["model=interaction"], ["-m", "model=contact,interaction"]],
+        ["model=contact"],
+    ),
     "model/encoder=interaction": (
-        ["model=grip", "model/encoder=interaction"],
+        [["model=grip", "model/encoder=interaction"]],
         ["model=grip", "model/encoder=contact"],
     ),
     "model.encoder.name=interaction": (
-        ["model.encoder.name=interaction"],
+        [["model.encoder.name=interaction"], ["model.encoder.name='interaction'"]],
         ["model.encoder.name=contact"],
     ),
-    "data.protocol=paper": (["data.protocol=paper"], ["data.protocol=in_sample"]),
-    "data.paper_windows": (["data.paper_windows=3"], ["data.in_sample_windows=3"]),
+    "data.protocol=paper": (
+        [["data.protocol=paper"], ["--cfg", "job", "data.protocol=paper"]],
+        ["data.protocol=in_sample"],
+    ),
+    "data.paper_windows": (
+        [["data.paper_windows=3"], ["+data.paper_windows=3"]],
+        ["data.in_sample_windows=3"],
+    ),
 }
 
 
-@pytest.mark.parametrize("old_name", RENAMES)
-def test_renamed_options_keep_working_for_one_release_with_one_line(old_name, caplog):
-    """Each old name composes the same run as its new name and prints one line naming the new
-    one; the new names are quiet; every rename is listed on the configuration page."""
-    from gripdem.runner.config_schema import check_combination
-    from gripdem.runner.renamed_options import PRINTED, RENAMED, apply_deprecated_names
+@pytest.mark.parametrize("old_name", REMOVED)
+def test_removed_names_are_refused_in_one_line_naming_the_new_one(old_name):
+    """Each name renamed in 0.1.0 is refused in 0.2.0 by gripdem's own line (not Hydra's
+    message for a missing config file or key), however it is given; its new name composes;
+    every removed name is still listed on the configuration page."""
+    from gripdem.runner.renamed_options import RENAMED, refuse_removed_names
 
-    PRINTED.clear()
-    old_overrides, new_overrides = RENAMES[old_name]
-    old, new = compose_run(old_overrides), compose_run(new_overrides)
-    with caplog.at_level("WARNING"):
-        assert apply_deprecated_names(old) == [old_name]
-    assert apply_deprecated_names(new) == []
-    warnings = [r.getMessage() for r in caplog.records if "deprecated" in r.getMessage()]
-    assert warnings == [
-        f"{old_name} is deprecated: use {RENAMED[old_name][0]} (the old name goes in gripdem "
-        f"{RENAMED[old_name][1]})"
-    ]
-
-    def plain(cfg):
-        return OmegaConf.to_container(cfg, resolve=False, enum_to_str=True)
-
-    assert {k: v for k, v in plain(old).items() if k != "hydra"} == {
-        k: v for k, v in plain(new).items() if k != "hydra"
-    }
-    caplog.clear()
-    with caplog.at_level("WARNING"):
-        check_combination(old)  # the whole check runs on the renamed config
-        check_combination(compose_run(old_overrides), notes=False)  # a sweep's next job
-    assert "deprecated" not in caplog.text  # one line per process
+    line = (
+        f"{old_name} was renamed {RENAMED[old_name][0]} in gripdem 0.1.0 and removed in 0.2.0: "
+        f"use {RENAMED[old_name][0]}"
+    )
+    old_lines, new_overrides = REMOVED[old_name]
+    for argv in old_lines:
+        with pytest.raises(ValueError) as refused:
+            refuse_removed_names(argv)
+        assert str(refused.value) == line, argv
+    refuse_removed_names(new_overrides)  # the new name passes
+    compose_run(new_overrides)  # and composes
+    with pytest.raises(ConfigCompositionException):  # the old one is gone from the config
+        compose_run(old_lines[0])
     page = (ROOT / "docs" / "reference" / "configuration.md").read_text()
     assert f"| `{old_name}` | `{RENAMED[old_name][0]}` |" in page
 
 
-def test_every_rename_is_tested():
+def test_every_removed_name_is_tested():
     from gripdem.runner.renamed_options import RENAMED
 
-    assert set(RENAMED) == set(RENAMES)
+    assert set(RENAMED) == set(REMOVED)
+    assert all(
+        renamed == "0.1.0" and removed == "0.2.0" for _, renamed, removed in RENAMED.values()
+    )

@@ -63,6 +63,43 @@ def test_a_bad_job_of_a_sweep_is_named_before_any_job_runs(tmp_path):
     assert not sweep.exists()
 
 
+def test_a_removed_name_ends_the_command_before_anything_is_written(tmp_path):
+    """``python -m gripdem.run`` with removed names: one line naming each one's replacement,
+    status 1, no run folder, no dataset generated; Hydra's own message never shown."""
+    from gripdem.runner.renamed_options import removed_line
+
+    run_dir, data = tmp_path / "run", tmp_path / "data"
+    names = [
+        "experiment=fast",
+        "model.fast_steps",
+        "model/encoder=interaction",
+        "model.encoder.name=interaction",
+        "data.protocol=paper",
+        "data.paper_windows",
+    ]
+    proc = gripdem_run(
+        [
+            *("experiment=fast", "+model.fast_steps=100", "model/encoder=interaction"),
+            *("model.encoder.name=interaction", "data.protocol=paper", "data.paper_windows=3"),
+            f"hydra.run.dir={run_dir}",
+        ],
+        tmp_path,
+        data,
+    )
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert lines == ["error: " + "; ".join(removed_line(name) for name in names)], lines
+    assert not run_dir.exists() and not data.exists()
+    # a sweep that chooses a removed config file among others: refused before any job
+    sweep = tmp_path / "sweep"
+    proc = gripdem_run(
+        ["-m", "model=contact,interaction", f"hydra.sweep.dir={sweep}"], tmp_path, data
+    )
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert proc.stderr.splitlines() == [f"error: {removed_line('model=interaction')}"]
+    assert not sweep.exists() and not data.exists()
+
+
 def test_decoder_modes_differ_only_in_the_mode():
     """model=grip,pct,vct is a fair sweep: same encoder, decoder, budget and data; the default
     model (contact) is grip under its own name."""
@@ -88,7 +125,7 @@ def test_decoder_modes_differ_only_in_the_mode():
 @pytest.mark.parametrize(
     ("overrides", "low", "high"),
     [
-        # measured on the 2-core machine (experiments/results/mission_command.md)
+        # measured on the 2-core machine (experiments/results/split_sweep/split_sweep.md)
         (["split=190-10", "model=vct"], 120, 300),
         (["split=100-100", "model=vct"], 150, 400),
         (["split=190-10", "model=vct_paper"], 600, 1500),
@@ -124,7 +161,7 @@ def test_a_sweep_says_its_jobs_and_their_cost_first(tmp_path):
         if line.startswith("import time:")
     }
     assert "gripdem.runner.parallel_launcher" in imported and "lightning" not in imported
-    assert "on a 2-core CPU like the reference machine" in plan[0]
+    assert "on a 2-core CPU like the one it was measured on" in plan[0]
     assert "dataset" not in plan[0]  # data.path given: nothing to generate
     # every job failed on its data: each is named with its error, and the command says so
     assert proc.returncode == 1

@@ -213,7 +213,8 @@ def markdown_card(
         f"The {what} of the `{card['scene']}` scene (gripdem "
         f"{card['gripdem_version']}): `python -m gripdem.predict pretrained:{name} DATA.h5`, "
         f"or fine-tune with `python -m gripdem.run data.path=MINE.h5 scene={card['scene']} "
-        f"model.init_from=pretrained:{name}`. {n_weights:,} weights, {size_bytes / 1e6:.2f} MB, "
+        + ("model=ensemble " if ensemble else "")
+        + f"model.init_from=pretrained:{name}`. {n_weights:,} weights, {size_bytes / 1e6:.2f} MB, "
         "data only (safetensors with a JSON card; nothing is unpickled).",
         "",
         "## Training data",

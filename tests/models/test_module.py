@@ -115,7 +115,8 @@ def test_gradients_reach_every_parameter(tiny_lebc_path, mode, encoding, shift, 
 
 #: Adam steps and the fold asked of them. Measured folds (lowest of the 20 losses before the
 #: step), over every mode, ATEN_CPU_CAPABILITY=default|avx2|avx512 and 1|2 threads
-#: (experiments/analyses/overfit_folds.py, experiments/results/overfit_folds.md): after 120
+#: (experiments/analyses/overfit_folds.py, experiments/results/test_suite/overfit_folds.md):
+#: after 120
 #: steps 4.14-4.45 (vct, exact frame), 9.2-31.5 (every other mode); 2 leaves more than twice
 #: the smallest. (200 steps and a fold of 5 had the same margin at 1.7x the time.)
 OVERFIT_STEPS = 120
@@ -149,7 +150,8 @@ def test_overfits_one_window(tiny_lebc_path, mode, encoding, shift, encoder):
     The fold reached moves with the CPU's vector unit and the thread count (Adam at lr 1e-2
     oscillates near its floor), so the test reads the lowest loss of the last 20 steps and asks
     for a fold well inside the spread measured over ATEN_CPU_CAPABILITY=default|avx2|avx512 and
-    1|2 threads (experiments/results/overfit_folds.md): the smallest fold measured there is
+    1|2 threads (experiments/results/test_suite/overfit_folds.md): the smallest fold measured
+    there is
     at least twice the one asked for here.
     """
     losses = overfit_losses(tiny_lebc_path, mode, encoding, shift, encoder, OVERFIT_STEPS)

@@ -7,9 +7,9 @@
 # the preset's 5: their validation RMSE plateaus after the first epoch (measured at 190-10 lebc:
 # 0.966, 0.956, 0.953, 0.952, 0.952 of CV's over epochs 1-5), and five epochs of all three
 # would triple the sweep's 6 hours on 2 cores.
-#   bash experiments/analyses/accuracy_sweep.sh multirun/issue9
+#   bash experiments/analyses/accuracy_sweep.sh multirun/accuracy_sweep
 set -euo pipefail
-out=${1:-multirun/issue9}
+out=${1:-multirun/accuracy_sweep}
 python=${PYTHON:-.venv/bin/python}
 common=(hydra/launcher=local_parallel torch_threads=1 seed=0,1,2 scene=pbc,lebc)
 for split in 190-10 180-20 150-50 100-100; do

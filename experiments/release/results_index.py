@@ -45,6 +45,8 @@ QUESTIONS = {
     "ensembles' ablation and its runs)?",
     "paper_models": "How do the paper's own models (graph-conv encoder, GRU decoders) compare with "
     "the contact model and the baselines at every split, and do the paper's claims hold (0.1.0)?",
+    "dem_data": "Do the built-in scenes' datasets look like the physics they claim (the "
+    "generator's validation: overlaps, flow profile, crossings, non-affine motion)?",
     "fine_tuning": "Which optimiser settings should fine-tuning use?",
     "test_suite": "Do the tests' thresholds hold on every CPU path and thread count, and does a "
     "killed command leave anything behind?",

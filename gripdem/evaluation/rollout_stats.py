@@ -38,6 +38,25 @@ import numpy as np
 
 from gripdem.boundary import Boundary, NeighbourList, displacement, neighbour_pairs
 
+#: the surrogate's targets over a long rollout (docs/explanation/surrogate.md#targets), stated
+#: once: the largest relative deviation from the truth's statistic (``coordination``: contacts
+#: within 1.01 d; ``msd``: non-affine MSD at every lag; ``rms_non_affine``: the RMS non-affine
+#: step; ``diffusion``: D per axis; ``profile``: the mean-flow amplitude), the largest g(r) L1
+#: distance (``gr_l1``), the largest overlapping fraction of particles in any frame
+#: (``overlap``), and the bands of the hand-back's fluctuation kinetic energy, an ensemble's
+#: spread/skill and its rank histogram (bins over uniform)
+SURROGATE_TARGETS = {
+    "coordination": 0.03,
+    "msd": 0.15,
+    "rms_non_affine": 0.10,
+    "diffusion": 0.20,
+    "profile": 0.03,
+    "gr_l1": 0.02,
+    "overlap": 0.01,
+    "handback": (0.8, 1.25),
+    "spread_skill": (0.8, 1.2),
+    "rank_over_uniform": (0.5, 1.5),
+}
 OVERLAP_FACTOR = 0.98
 CONTACT_FACTOR = 1.01
 GR_MAX_D, GR_BIN_D = 3.0, 0.05

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 from matplotlib.figure import Figure
 
+from gripdem.evaluation.rollout_stats import SURROGATE_TARGETS
 from gripdem.plots.common import new_figure
 
 #: (block key, panel title, target: ± ratio band or the largest distance)
 PANELS = (
-    ("ratio/coordination", "contacts within 1.01 d", 0.05),
-    ("gr_l1", "g(r) L1 distance (0-3 d)", 0.03),
-    ("ratio/msd_10_over_d2", "non-affine MSD, lag 10", 0.15),
+    ("ratio/coordination", "contacts within 1.01 d", SURROGATE_TARGETS["coordination"]),
+    ("gr_l1", "g(r) L1 distance (0-3 d)", SURROGATE_TARGETS["gr_l1"]),
+    ("ratio/msd_10_over_d2", "non-affine MSD, lag 10", SURROGATE_TARGETS["msd"]),
 )
 
 

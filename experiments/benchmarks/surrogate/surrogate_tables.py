@@ -12,6 +12,8 @@ import numpy as np
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
 from benchlib import fmt, markdown_table  # noqa: E402
 
+from gripdem.evaluation.rollout_stats import SURROGATE_TARGETS  # noqa: E402
+
 MARKS = (1, 10, 30, 100)
 
 
@@ -32,7 +34,7 @@ def _within(value: float, tolerance: float) -> bool | None:
 
 
 def targets(scene: dict, reference: dict | None = None) -> list[list]:
-    """The surrogate's targets (issue 25), worst over the blocks and the members."""
+    """The surrogate's targets (``SURROGATE_TARGETS``), worst over the blocks and the members."""
     blocks = _all_blocks(scene)
     model_overlap = max(scene["blocks"]["overlap_per_frame"]["model"])
     rm = scene["rmse_over_d"]
@@ -43,26 +45,55 @@ def targets(scene: dict, reference: dict | None = None) -> list[list]:
     drift = max(abs(b["model/drift_over_d"]) for b in blocks)
     truth_drift = max(abs(b["truth/drift_over_d"]) for b in blocks)
     ratios = [h.get("fluctuation_ratio", math.inf) for h in scene["handback"]]
-    rows = [["overlap <= 1 % every frame", fmt(100 * model_overlap) + " %", model_overlap <= 0.01]]
+    t = SURROGATE_TARGETS
+    rows = [
+        [
+            f"overlap <= {t['overlap']:.0%} every frame",
+            fmt(100 * model_overlap) + " %",
+            model_overlap <= t["overlap"],
+        ]
+    ]
     for lag in (1, 10, 100):
         worst = _worst(blocks, f"ratio/msd_{lag}_over_d2")
-        rows.append([f"non-affine MSD lag {lag} within 15 %", fmt(worst), _within(worst, 0.15)])
+        rows.append(
+            [
+                f"non-affine MSD lag {lag} within {t['msd']:.0%}",
+                fmt(worst),
+                _within(worst, t["msd"]),
+            ]
+        )
     worst = _worst(blocks, "ratio/rms_non_affine_over_d")
-    rows.append(["RMS non-affine step within 10 %", fmt(worst), _within(worst, 0.10)])
+    rows.append(
+        [
+            f"RMS non-affine step within {t['rms_non_affine']:.0%}",
+            fmt(worst),
+            _within(worst, t["rms_non_affine"]),
+        ]
+    )
     if "diffusion" in scene:
         truth = np.asarray(scene["diffusion"]["truth"])
         worst = max(
             float(np.max(np.abs(np.asarray(m) / truth - 1))) for m in scene["diffusion"]["members"]
         )
-        rows.append(["self-diffusion D_x, D_y, D_z within 20 %", fmt(worst), _within(worst, 0.20)])
+        rows.append(
+            [
+                f"self-diffusion D_x, D_y, D_z within {t['diffusion']:.0%}",
+                fmt(worst),
+                _within(worst, t["diffusion"]),
+            ]
+        )
     for name, key, tol in (
-        ("contacts within 1.01 d within 3 %", "ratio/coordination", 0.03),
-        ("flow profile within 3 %", "ratio/profile", 0.03),
+        (
+            f"contacts within 1.01 d within {t['coordination']:.0%}",
+            "ratio/coordination",
+            t["coordination"],
+        ),
+        (f"flow profile within {t['profile']:.0%}", "ratio/profile", t["profile"]),
     ):
         worst = _worst(blocks, key)
         rows.append([name, fmt(worst), _within(worst, tol)])
     gr = max(b["gr_l1"] for b in blocks)
-    rows.append(["g(r) L1 <= 0.02 every block", fmt(gr), gr <= 0.02])
+    rows.append([f"g(r) L1 <= {t['gr_l1']:g} every block", fmt(gr), gr <= t["gr_l1"]])
     rows.append(
         [
             "uniform drift within the truth's noise",
@@ -72,9 +103,9 @@ def targets(scene: dict, reference: dict | None = None) -> list[list]:
     )
     rows.append(
         [
-            "hand-back fluctuation KE 0.8-1.25 of the truth's",
+            "hand-back fluctuation KE {:g}-{:g} of the truth's".format(*t["handback"]),
             ", ".join(fmt(r) for r in ratios),
-            bool(ratios) and min(ratios) >= 0.8 and max(ratios) <= 1.25,
+            bool(ratios) and min(ratios) >= t["handback"][0] and max(ratios) <= t["handback"][1],
         ]
     )
     rows.append([f"RMSE <= CV and AR, frames 1-{n}", f"{losses} frame(s) above", losses == 0])
@@ -82,17 +113,17 @@ def targets(scene: dict, reference: dict | None = None) -> list[list]:
         ss = scene["spread_skill"]
         rows.append(
             [
-                f"spread/skill 0.8-1.2 at every frame 1-{len(ss)}",
+                "spread/skill {:g}-{:g} at every frame 1-{}".format(*t["spread_skill"], len(ss)),
                 f"{min(ss):.3g}-{max(ss):.3g}",
-                min(ss) >= 0.8 and max(ss) <= 1.2,
+                min(ss) >= t["spread_skill"][0] and max(ss) <= t["spread_skill"][1],
             ]
         )
         hist = np.asarray(scene["rank_histogram"]) * len(scene["rank_histogram"])
         rows.append(
             [
-                "rank histogram within 0.5-1.5x of uniform",
+                "rank histogram within {:g}-{:g}x of uniform".format(*t["rank_over_uniform"]),
                 f"{hist.min():.2f}-{hist.max():.2f}",
-                hist.min() >= 0.5 and hist.max() <= 1.5,
+                hist.min() >= t["rank_over_uniform"][0] and hist.max() <= t["rank_over_uniform"][1],
             ]
         )
     if reference is not None and scene["members"] > 1:

@@ -50,17 +50,23 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "analyses"))
 from ensemble_ablation import statistics_ranges  # noqa: E402
 
 _T = SURROGATE_TARGETS
+
+
+def _pct(fraction: float) -> str:
+    return f"{100 * fraction:g} %"
+
+
 #: the long-rollout statistics a card shows: (key, label, target), the targets of
 #: gripdem.evaluation.rollout_stats.SURROGATE_TARGETS
 SURROGATE_ROWS = (
-    ("coordination", "contacts within 1.01 d", f"±{_T['coordination']:.0%}"),
+    ("coordination", "contacts within 1.01 d", "±" + _pct(_T["coordination"])),
     ("gr_l1", "g(r) L1 distance (two DEM runs: the report's noise floor)", f"≤ {_T['gr_l1']:g}"),
-    ("msd_1", "non-affine MSD, lag 1", f"±{_T['msd']:.0%}"),
-    ("msd_10", "non-affine MSD, lag 10", f"±{_T['msd']:.0%}"),
-    ("msd_100", "non-affine MSD, lag 100", f"±{_T['msd']:.0%}"),
-    ("diffusion", "self-diffusion D (x, y, z)", f"±{_T['diffusion']:.0%}"),
-    ("profile", "flow profile", f"±{_T['profile']:.0%}"),
-    ("overlap_pct", "overlap (% of particles, worst frame)", f"≤ {_T['overlap']:.0%}"),
+    ("msd_1", "non-affine MSD, lag 1", "±" + _pct(_T["msd"])),
+    ("msd_10", "non-affine MSD, lag 10", "±" + _pct(_T["msd"])),
+    ("msd_100", "non-affine MSD, lag 100", "±" + _pct(_T["msd"])),
+    ("diffusion", "self-diffusion D (x, y, z)", "±" + _pct(_T["diffusion"])),
+    ("profile", "flow profile", "±" + _pct(_T["profile"])),
+    ("overlap_pct", "overlap (% of particles, worst frame)", "≤ " + _pct(_T["overlap"])),
     ("spread_skill", "spread/skill, frames 1-100", "{:g}-{:g}".format(*_T["spread_skill"])),
     (
         "rank_over_uniform",

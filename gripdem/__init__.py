@@ -1,4 +1,4 @@
-"""gripdem: graph-based interaction-aware trajectory forecasts for DEM unit cells.
+"""gripdem: graph-based trajectory forecasts (GRIP++, PCT, VCT) for DEM unit cells.
 
 The Python API (:mod:`gripdem.api`) is re-exported here and imported on first use, so
 ``import gripdem`` stays fast and imports no torch.

@@ -1,5 +1,5 @@
 """Neural building blocks with documented tensor shapes: the paper's sparse graph-convolution
-encoder, the interaction-aware message-passing encoder (pair messages from relative geometry and
+encoder, the contact encoder (message passing with pair messages from relative geometry and
 motion), and the seq2seq GRU trajectory decoder. Plain ``torch.nn`` modules that know nothing of
 files, boundaries or Lightning.
 """

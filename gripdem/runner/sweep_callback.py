@@ -1,4 +1,6 @@
-"""Hydra callback: after a multirun, one summary table across its jobs (Markdown and CSV).
+"""Hydra callback: after a multirun, one summary table across its jobs (Markdown and CSV), and
+a short one on the console (:func:`gripdem.evaluation.sweep_console.console_summary`: the swept
+keys, ÷ CV, ÷ AR, overlap and minutes within 100 columns).
 
 Registered in ``conf/config.yaml`` under ``hydra.callbacks``. A job that failed is a row with
 its error line, and the command ends with one line naming every failed job with its overrides
@@ -16,6 +18,7 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+from gripdem.evaluation.sweep_console import console_summary
 from gripdem.evaluation.sweep_summary import collect, write_summary
 from gripdem.runner.console import report_error
 
@@ -40,12 +43,12 @@ class SweepSummary(Callback):
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep_dir = Path(config.hydra.sweep.dir)
         try:
-            md, csv_path, markdown = write_summary(sweep_dir)
+            md, csv_path, _ = write_summary(sweep_dir)
         except FileNotFoundError as exc:  # every job failed before writing anything
             log.warning("no sweep summary: %s", exc)
             return
-        print(markdown)
-        print(f"sweep summary: {md} and {csv_path}")
+        print(console_summary(collect(sweep_dir)))
+        print(f"the full tables: {md} and {csv_path}")
         print(tensorboard_hint(sweep_dir))
         # a job failed: its error line (error.txt), or no metrics.json (it crashed)
         failed = [job for job in collect(sweep_dir) if job.status != "ok"]

@@ -183,3 +183,32 @@ def test_jobs_named_by_what_differs_keep_the_sweeps_order(tmp_path):
         job = make_job(root, name, [name], metrics_of(1e-8, 2e-8, 1.0))
         (job / ".hydra" / "hydra.yaml").write_text(f"hydra:\n  job:\n    num: {number}\n")
     assert [j.name for j in collect(root)] == ["split=190-10", "split=100-100", "split=150-50"]
+
+
+def test_the_console_summary_keeps_to_100_columns_with_long_swept_values(tmp_path):
+    """Many swept keys with long values: every line keeps to 100 columns (the values are cut),
+    the numbers stay whole, and the seeds are grouped with mean ± std."""
+    from gripdem.evaluation.sweep_console import console_summary
+
+    root = tmp_path / "sweep"
+    long = "data.path=/a/very/long/path/to/somebody/elses/dataset/file_of_many_words_"
+    for n, (seed, lr) in enumerate([(0, "1e-3"), (1, "1e-3"), (0, "3e-3"), (1, "3e-3")]):
+        metrics = {
+            "test/rmse_ratio_constant_velocity": 0.70 + 0.01 * n,
+            "test/rmse_ratio_linear_ar": 0.72 + 0.01 * n,
+            "test/physics/model/overlap_fraction": 0.0003,
+            "run_seconds": 330.0,
+        }
+        overrides = [f"seed={seed}", f"model.lr={lr}", f"{long}{lr}.h5", "split=190-10"]
+        make_job(root, n, overrides, metrics)
+    text = console_summary(collect(root))
+    lines = text.splitlines()
+    assert max(len(line) for line in lines) <= 100
+    assert lines[0].split()[-4:] == ["AR", "overlap", "%", "min"]
+    assert "0.7" in lines[1] and "0.72" in lines[1] and "5.5" in lines[1] and "0.03" in lines[1]
+    assert "…" in lines[1]  # the long swept value was cut, not the numbers
+    assert "mean ± std over seeds:" in lines
+    grouped = lines[lines.index("mean ± std over seeds:") + 1 :]
+    assert grouped[0].split()[:2] == ["group", "seeds"] and len(grouped) == 3  # two groups
+    assert grouped[1] != grouped[2]  # the paths differ past the cut: still two groups
+    assert " 2 " in grouped[1] and "±" in grouped[1]

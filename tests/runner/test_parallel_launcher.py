@@ -83,6 +83,13 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     assert "ar_lags=50" in error and not (failed / "metrics.json").exists()
     summary = (sweep / "summary.md").read_text()
     assert "| ok |" in summary and f"failed: {error.strip()}" in summary
+    # the console's summary: the short table within 100 columns, then where the full one is
+    out = proc.stdout.splitlines()
+    header = ["job", "status", "÷", "CV", "÷", "AR", "overlap", "%", "min"]
+    console = out[next(i for i, line in enumerate(out) if line.split() == header) :]
+    assert console[1].startswith("baselines.ar_lags=3 ") and "failed: " in console[2]
+    assert max(len(line) for line in console[:3]) <= 100
+    assert f"the full tables: {sweep / 'summary.md'} and {sweep / 'summary.csv'}" in proc.stdout
     lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert len(lines) == 1 and "job baselines.ar_lags=50 (" in lines[0]
     assert "ar_lags=3 " not in lines[0]  # only the failed job is named

@@ -13,10 +13,11 @@ hydra.mode=RUN hydra.job.num=<n>`` (its name: ``hydra.sweep.subdir``, what diffe
 :mod:`gripdem.runner.run_names`) with ``OMP_NUM_THREADS=<threads>``: a single run in a fresh
 process, so its log, TensorBoard run, checkpoints and errors stay its own. What it prints goes
 to ``<job folder>/console.log``; the sweep's console gets one line when a job starts and one
-when it ends (its time and error line). At most ``n_jobs`` run at once, and ``n_jobs x threads``
-never exceeds the CPUs given to this process (no oversubscription). A job that fails writes
-``error.txt`` (the one error line), returns NaN to the sweeper, and leaves the other jobs
-running; the sweep's summary names it.
+when it ends (its time and error line), and, between them, the job's data generation or its
+wait for another job's (:mod:`gripdem.runner.job_relay`). At most ``n_jobs`` run at once, and
+``n_jobs x threads`` never exceeds the CPUs given to this process (no oversubscription). A job
+that fails writes ``error.txt`` (the one error line), returns NaN to the sweeper, and leaves the
+other jobs running; the sweep's summary names it.
 
 Stopping: Ctrl-C reaches every job (one process group) and each answers with its one
 ``interrupted:`` line in its console.log (a job still running 5 s later gets SIGTERM); SIGTERM
@@ -44,6 +45,7 @@ from omegaconf import DictConfig, open_dict
 
 from gripdem.evaluation.sweep_summary import ERROR_FILE
 from gripdem.runner.console import SWEEP_JOB_ENV, Terminated
+from gripdem.runner.job_relay import ConsoleRelay
 
 #: seconds between checks of the running jobs
 POLL_SECONDS = 0.2
@@ -118,6 +120,7 @@ class _Job:
         self.dir = _job_dir(config)
         self.process: subprocess.Popen | None = None
         self.started = 0.0
+        self.relay = ConsoleRelay(self.dir / "console.log")
 
     @property
     def label(self) -> str:
@@ -150,6 +153,11 @@ class _Job:
             )
         self.started = time.perf_counter()
         print(f"job {self.label} started (log: {self.dir / 'console.log'})", flush=True)
+
+    def show_progress(self) -> None:
+        """The job's long work (its data generation, or its wait for another's) as it goes."""
+        for line in self.relay.poll(time.monotonic()):
+            print(f"job #{self.number}: {line}", flush=True)
 
     def result(self, metric: str) -> JobReturn:
         value, error = _return_value(self.dir, metric)
@@ -232,6 +240,8 @@ def launch_jobs(
                 job.start(threads)
                 running.append(job)
             time.sleep(POLL_SECONDS)
+            for job in running:
+                job.show_progress()
             for job in [j for j in running if j.process.poll() is not None]:
                 running.remove(job)
                 results[job.number] = job.result(metric)

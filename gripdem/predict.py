@@ -102,7 +102,7 @@ def _summary_lines(report: dict[str, Any], divergence: list[str], path: Path) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from gripdem.inference.rollout import OVERLAP_MARGIN
+    from gripdem.inference.rollout_limits import OVERLAP_MARGIN
 
     p = argparse.ArgumentParser(
         prog="python -m gripdem.predict",

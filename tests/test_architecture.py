@@ -6,6 +6,8 @@ which the README's test command runs before the tests."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import gripdem
@@ -71,3 +73,22 @@ def test_every_file_keeps_to_400_lines():
             if lines > MAX_LINES:
                 long[str(path.relative_to(ROOT))] = lines
     assert not long, f"files over {MAX_LINES} lines: {long}"
+
+
+def test_the_clis_help_imports_neither_torch_nor_lightning():
+    """``--help`` answers at once: the CLIs import torch and Lightning only for work."""
+    code = (
+        "import runpy, sys\n"
+        "for module in ('gripdem.predict', 'gripdem.run'):\n"
+        "    sys.argv = [module, '--help']\n"
+        "    try:\n"
+        "        runpy.run_module(module, run_name='__main__')\n"
+        "    except SystemExit:\n"
+        "        pass\n"
+        "print(sorted(m for m in ('torch', 'lightning') if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout[-500:]

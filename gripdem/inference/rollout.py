@@ -36,12 +36,9 @@ import torch
 
 from gripdem.data.schema import DatasetMeta
 from gripdem.evaluation.physics import OVERLAP_TOLERANCE
+from gripdem.inference.rollout_limits import ESCAPE_FRACTION, OVERLAP_MARGIN
 from gripdem.inference.stepper import Stepper, StepperSettings
 
-#: a predicted step longer than this fraction of the smallest box length counts as an escape
-ESCAPE_FRACTION = 0.25
-#: default: flag overlap once this many more particles overlap than at the observed frame
-OVERLAP_MARGIN = 0.05
 #: bytes a rollout holds per kept position value: the frames as kept, their concatenation and
 #: the copies a caller's scores make (float64, about 3 copies)
 BYTES_PER_POSITION = 3 * 8

@@ -55,13 +55,15 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     on its data; the summary names the failed job with its error and the command ends with
     status 1 after writing it."""
     sweep = tmp_path / "sweep"
+    command = sweep_command(
+        sweep,
+        "baselines.ar_lags=3,50",  # 50 lags: more than the 5 frames the windows hold
+        "hydra/launcher=parallel",
+        "hydra.launcher.n_jobs=2",
+    )
+    command[1:1] = ["-X", "importtime"]  # the controlling process's imports (not its jobs')
     proc = subprocess.run(
-        sweep_command(
-            sweep,
-            "baselines.ar_lags=3,50",  # 50 lags: more than the 5 frames the windows hold
-            "hydra/launcher=parallel",
-            "hydra.launcher.n_jobs=2",
-        ),
+        command,
         env=env_of(gripdem_data_root),
         capture_output=True,
         text=True,
@@ -90,6 +92,8 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     assert console[1].startswith("baselines.ar_lags=3 ") and "failed: " in console[2]
     assert max(len(line) for line in console[:3]) <= 100
     assert f"the full tables: {sweep / 'summary.md'} and {sweep / 'summary.csv'}" in proc.stdout
+    imported = [line.rsplit("|", 1)[-1].strip() for line in proc.stderr.splitlines()]
+    assert "hydra" in imported and not [m for m in imported if m.startswith("lightning")]
     lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert len(lines) == 1 and "job baselines.ar_lags=50 (" in lines[0]
     assert "ar_lags=3 " not in lines[0]  # only the failed job is named

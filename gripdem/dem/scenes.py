@@ -32,6 +32,7 @@ from gripdem.dem.engine import Simulation
 from gripdem.dem.packing import random_packing
 from gripdem.dem.params import GENERATOR_NAME, GENERATOR_VERSION
 from gripdem.dem.workers import die_with_parent
+from gripdem.provenance import available_cpus
 
 #: an overlap above this fraction of the diameter in any step means contacts pass through each
 #: other: the step is too large for the stiffness (the refusal in GeneratorConfig covers equal
@@ -166,8 +167,7 @@ def resolve_workers(config: GeneratorConfig, workers: int | None, device: str = 
         return 1
     if workers is None and config.preset.particles * config.total_steps < PARALLEL_MIN_WORK:
         return 1
-    available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    limit = available or 1
+    limit = available_cpus()
     return max(1, min(config.sims, limit if workers is None else int(workers)))
 
 

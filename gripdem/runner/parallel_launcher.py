@@ -44,6 +44,7 @@ from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 from omegaconf import DictConfig, open_dict
 
 from gripdem.evaluation.sweep_summary import ERROR_FILE
+from gripdem.provenance import available_cpus
 from gripdem.runner.console import SWEEP_JOB_ENV, Terminated
 from gripdem.runner.job_relay import ConsoleRelay
 
@@ -53,12 +54,6 @@ POLL_SECONDS = 0.2
 STOP_SECONDS = 20.0
 #: seconds the jobs get to answer a terminal's Ctrl-C themselves before they are sent SIGTERM
 CTRL_C_SECONDS = 5.0
-
-
-def available_cpus() -> int:
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def plan_parallel(n_jobs: int | None, threads: int | None, uses_gpu: bool) -> tuple[int, int]:

@@ -47,11 +47,12 @@ class SweepSummary(Callback):
         except FileNotFoundError as exc:  # every job failed before writing anything
             log.warning("no sweep summary: %s", exc)
             return
-        print(console_summary(collect(sweep_dir)))
+        jobs = collect(sweep_dir)
+        print(console_summary(jobs))
         print(f"the full tables: {md} and {csv_path}")
         print(tensorboard_hint(sweep_dir))
         # a job failed: its error line (error.txt), or no metrics.json (it crashed)
-        failed = [job for job in collect(sweep_dir) if job.status != "ok"]
+        failed = [job for job in jobs if job.status != "ok"]
         if failed:
             named = "; ".join(
                 f"job {job.name} ({' '.join(f'{k}={v}' for k, v in job.params.items())}): "

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import hydra
@@ -27,7 +29,7 @@ from omegaconf import DictConfig
 
 from gripdem.config_files import config_dir
 from gripdem.runner.config_schema import given_data_path, register
-from gripdem.runner.console import run_hydra_command, single_run_errors
+from gripdem.runner.console import one_line, run_hydra_command, single_run_errors
 from gripdem.runner.renamed_options import refuse_removed_names
 
 CONFIG_DIR = str(config_dir())  # gripdem/conf: the source tree's conf/, or a wheel's copy
@@ -41,11 +43,11 @@ def main(cfg: DictConfig) -> float:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     _OUT_DIRS.append(out_dir)
     report = None
-    with single_run_errors(out_dir):
+    with single_run_errors(out_dir), study_trial(cfg) as trial:
         given_data_path(cfg)  # a wrong data.path fails before Lightning's import (seconds)
         from gripdem.runner.experiment import run_experiment
 
-        report = run_experiment(cfg, out_dir)
+        report = run_experiment(cfg, out_dir, trial)
     if not report:  # a non-zero DDP rank, or a failed job of a multirun (its error.txt)
         return math.nan
     metrics = {k: v for k, v in report.items() if isinstance(v, float)}
@@ -54,7 +56,30 @@ def main(cfg: DictConfig) -> float:
             f"optimized_metric={cfg.optimized_metric!r} is not among the run's metrics; "
             f"choose one of {sorted(metrics)}"
         )
-    return float(metrics[cfg.optimized_metric])
+    value = float(metrics[cfg.optimized_metric])
+    if trial is not None:  # the study learns the trial's end from the run itself
+        trial.prune() if trial.pruned else trial.complete(value)
+    return value
+
+
+@contextmanager
+def study_trial(cfg: DictConfig) -> Iterator:
+    """The study trial this run is (``study_trial.*``, :mod:`gripdem.study.trial`), or None;
+    an error fails the trial with its one line before the run's error handling reports it;
+    an interruption leaves it to the study's heartbeat check."""
+    if cfg.study_trial.number is None:
+        yield None
+        return
+    from gripdem.study.trial import open_trial
+
+    trial = open_trial(cfg)
+    try:
+        yield trial
+    except Exception as exc:
+        trial.fail(one_line(exc))
+        raise
+    finally:
+        trial.close()
 
 
 def kept() -> str:

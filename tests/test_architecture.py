@@ -40,6 +40,7 @@ LAYERS = {
     "inference",
     "plots",
     "runner",
+    "study",  # hyperparameter studies: the study sweeper and a trial's side of it
 }
 MAX_LINES = 400
 

@@ -2,7 +2,8 @@
 100 columns. The full tables stay in ``summary.md`` / ``summary.csv``
 (:func:`gripdem.evaluation.sweep_summary.write_summary`).
 
-Columns: the swept keys (values cut to fit), the status, the test RMSE over constant velocity's
+Columns (a study's trials: the state, the validation RMSE over constant velocity's, steps and
+minutes): the swept keys (values cut to fit), the status, the test RMSE over constant velocity's
 (``÷ CV``) and over the linear AR filter's (``÷ AR``), the overlapping fraction of particles at
 the last predicted frame (``overlap %``) and the job's wall minutes; grouped over seeds, the
 mean ± std of each.
@@ -21,6 +22,13 @@ COLUMNS = (
     ("÷ CV", "test/rmse_ratio_constant_velocity", 1.0),
     ("÷ AR", "test/rmse_ratio_linear_ar", 1.0),
     ("overlap %", "test/physics/model/overlap_fraction", 100.0),
+    ("min", "run_seconds", 1 / 60),
+)
+#: the columns of a study's trials (``study/state`` in their metrics): ranked on validation,
+#: never tested (gripdem.study)
+STUDY_COLUMNS = (
+    ("val ÷ CV", "val/rmse_ratio_constant_velocity_best", 1.0),
+    ("steps", "steps", 1.0),
     ("min", "run_seconds", 1 / 60),
 )
 #: the widest a swept value's cell may be before it is cut (with "…")
@@ -69,7 +77,9 @@ def console_summary(jobs: Sequence[Job], width: int = WIDTH) -> str:
     """The jobs' rows (and, when they differ by seed, the groups' mean ± std), each line at most
     ``width`` characters."""
     keys = varying_params(jobs)
-    titles = [title for title, _, _ in COLUMNS]
+    study = any("study/state" in (job.metrics or {}) for job in jobs)
+    columns = STUDY_COLUMNS if study else COLUMNS
+    titles = [title for title, _, _ in columns]
 
     def swept(job: Job, names: Sequence[str]) -> str:
         values = [_cut(f"{k}={job.params.get(k)}", MAX_VALUE) for k in names]
@@ -78,8 +88,10 @@ def console_summary(jobs: Sequence[Job], width: int = WIDTH) -> str:
     rows = []
     for job in jobs:
         status = "ok" if job.status == "ok" else _cut(job.status, 30)
-        numbers = [_number(_value(job, key, scale)) for _, key, scale in COLUMNS]
-        rows.append([swept(job, keys), status, *numbers])
+        if study and job.status == "ok":
+            status = str((job.metrics or {}).get("study/state", "ok"))
+        numbers = [_number(_value(job, key, scale)) for _, key, scale in columns]
+        rows.append([job.name if study else swept(job, keys), status, *numbers])
     lines = _render(["job", "status", *titles], rows, width)
     if SEED_KEY in keys and len(jobs) > 1:
         group_keys = [k for k in keys if k != SEED_KEY]
@@ -92,7 +104,7 @@ def console_summary(jobs: Sequence[Job], width: int = WIDTH) -> str:
             done = [j for j in members if j.metrics is not None]
             cells = [
                 _stats(SeedStats.of([_value(j, key, scale) for j in done]))
-                for _, key, scale in COLUMNS
+                for _, key, scale in columns
             ]
             grouped.append([name, str(len(done)), *cells])
         lines += ["", "mean ± std over seeds:"]

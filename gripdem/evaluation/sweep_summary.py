@@ -50,6 +50,10 @@ DEFAULT_METRICS = (
     "test/rmse_linear_ar_crossers",
     "test/n_crossers",
     "val/rmse_best",
+    "val/rmse_ratio_constant_velocity_best",
+    "study/state",
+    "study/pruned_at_step",
+    "steps",
     "test/crossers/model/ci_low_over_d",
     "test/crossers/model/ci_high_over_d",
     "test/physics/model/overlap_fraction",
@@ -63,6 +67,8 @@ DEFAULT_METRICS = (
     "in_sample",
 )
 EXCLUDE = ("*rmse_step*",)
+#: the overrides that tie a study's trial to its study (the same in every trial but its number)
+STUDY_TRIAL_KEYS = "study_trial."
 
 
 @dataclass(frozen=True)
@@ -166,6 +172,8 @@ def collect(sweep_dir: str | os.PathLike) -> list[Job]:
         config = hydra_dir / "config.yaml"
         if overrides.exists():
             params = parse_overrides(_load_yaml(overrides) or [])
+            # a study trial's link to its study (gripdem.study.trial), not a setting
+            params = {k: v for k, v in params.items() if not k.startswith(STUDY_TRIAL_KEYS)}
         elif config.exists():
             params = flatten(_load_yaml(config) or {})
         else:

@@ -235,6 +235,21 @@ class LoggerSchema:
 
 
 @dataclass
+class StudyTrialSchema:
+    """Set by the study sweeper (``hparams_search=optuna``, :mod:`gripdem.study`) on each
+    trial's command line: the run is trial ``number`` of ``study`` in ``storage``; null
+    outside a study."""
+
+    storage: Optional[str] = None
+    study: Optional[str] = None
+    number: Optional[int] = None
+    heartbeat_seconds: float = 10.0
+    # test the trial's model (and write its predictions and figures): false in a study, which
+    # ranks on validation; retrain the best setting and test it
+    test: bool = False
+
+
+@dataclass
 class ConfigSchema:
     scene: Any = MISSING
     preset: Any = MISSING
@@ -252,6 +267,7 @@ class ConfigSchema:
     finetune: FinetuneSchema = field(default_factory=FinetuneSchema)
     optimized_metric: str = "val/rmse_best"
     outputs: OutputsSchema = field(default_factory=OutputsSchema)
+    study_trial: StudyTrialSchema = field(default_factory=StudyTrialSchema)
 
 
 def register() -> None:

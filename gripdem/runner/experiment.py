@@ -52,7 +52,13 @@ from gripdem.runner.finetune import (
     load_source,
     validate_start,
 )
-from gripdem.runner.outputs import physics_metrics, result_table, to_predictions, write_outputs
+from gripdem.runner.outputs import (
+    physics_metrics,
+    result_table,
+    to_predictions,
+    trial_report,
+    write_outputs,
+)
 from gripdem.runner.progress import StepBudgetBar
 from gripdem.runner.resume import ResumeCheckpoint, resumed_seconds
 from gripdem.runner.tensorboard_log import (
@@ -190,7 +196,11 @@ def hparams(cfg: DictConfig, dm: TrajectoryDataModule) -> dict[str, Any]:
     }
 
 
-def build_trainer(cfg: DictConfig, out_dir: Path, logger: RunLogger) -> L.Trainer:
+def build_trainer(
+    cfg: DictConfig, out_dir: Path, logger: RunLogger, extra: list | None = None
+) -> L.Trainer:
+    """The fit's Trainer: checkpoints, resume, early stopping and the progress bar as the
+    config says, then ``extra`` callbacks (a study trial's reporter)."""
     callbacks_cfg = plain(cfg.callbacks) or {}
     ckpt = callbacks_cfg.get("checkpoint", {})
     callbacks = [
@@ -220,6 +230,7 @@ def build_trainer(cfg: DictConfig, out_dir: Path, logger: RunLogger) -> L.Traine
         )
     if cfg.trainer.get("enable_progress_bar", True):  # steps of the budget, RMSE in d and / CV
         callbacks.append(StepBudgetBar())
+    callbacks += list(extra or [])
     return L.Trainer(
         **plain(cfg.trainer),
         logger=logger,
@@ -239,8 +250,11 @@ def test_model(model, dm: TrajectoryDataModule, test_trainer) -> dict:
     return model.test_results
 
 
-def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
-    """Train and test one configuration; returns the metrics written to ``metrics.json``."""
+def run_experiment(cfg: DictConfig, out_dir: Path, trial=None) -> dict[str, Any]:
+    """Train and test one configuration; returns the metrics written to ``metrics.json``.
+    ``trial``: the study trial this run is (:class:`gripdem.study.trial.TrialLink`): its
+    validations are reported to the study, and a pruned trial, or any trial when
+    ``study_trial.test`` is false, ends after training with its validation record."""
     out_dir = Path(out_dir)
     run_started = time.perf_counter()
     quiet_console()
@@ -272,7 +286,8 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     logger = RunLogger(**plain(cfg.logger))
     hp = hparams(cfg, dm)
     logger.log_run_hparams(run_hparams(cfg, dm.in_sample), trial_name(out_dir))
-    trainer = build_trainer(cfg, out_dir, logger)
+    reporter = [trial.reporter()] if trial is not None else []  # validations to the study
+    trainer = build_trainer(cfg, out_dir, logger, reporter)
     resume = out_dir / "checkpoints" / "last.ckpt"
     ckpt_path = str(resume) if cfg.resume and resume.exists() else None
     if cfg.resume and ckpt_path is None:
@@ -282,6 +297,8 @@ def run_experiment(cfg: DictConfig, out_dir: Path) -> dict[str, Any]:
     train_seconds = time.perf_counter() - started + resumed_seconds(trainer)
     if not trainer.is_global_zero:
         return {}
+    if trial is not None and (trial.pruned or not cfg.study_trial.test):
+        return trial_report(out_dir, trainer, logger, trial, train_seconds, run_started)
     if torch.distributed.is_available() and torch.distributed.is_initialized():
         torch.distributed.destroy_process_group()  # test on one process, all windows at once
     best = trainer.checkpoint_callback.best_model_path or None

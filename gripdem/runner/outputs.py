@@ -1,13 +1,17 @@
 """What a run writes after its test: the predictions file, the physics report's metrics,
-figures (PNG and TensorBoard images) and XYZ trajectories, and the result table it prints."""
+figures (PNG and TensorBoard images) and XYZ trajectories, and the result table it prints; a
+study trial's validation record when it ends without a test (:func:`trial_report`)."""
 
 from __future__ import annotations
 
+import json
 import math
+import time
 from pathlib import Path
 from typing import Any
 
 from gripdem.data.datamodule import TrajectoryDataModule
+from gripdem.data.h5io import atomic_write_text
 from gripdem.evaluation.predictions import Predictions, write_predictions
 from gripdem.models.baselines import BASELINES
 from gripdem.runner.config_schema import plain
@@ -132,3 +136,41 @@ def result_table(metrics: dict[str, float], diameter: float, in_sample: bool) ->
             " of uniform"
         )
     return "\n".join(rows)
+
+
+def trial_report(
+    out_dir: Path, trainer, logger, trial, seconds: float, started: float
+) -> dict[str, Any]:
+    """A study trial's end without the test (:mod:`gripdem.study.trial`): its validation
+    record in ``metrics.json`` (``study/state`` complete or pruned, the step it stopped at) and
+    in TensorBoard (``study/pruned``: 1 at the step a pruned trial stopped, else 0)."""
+    trained = trainer.lightning_module
+    best_score = trainer.checkpoint_callback.best_model_score
+    ratios = [ratio for _, _, ratio in trained.accuracy_curve]
+    metrics = {
+        "val/rmse_best": float(best_score) if best_score is not None else math.nan,
+        # the validation windows are fixed, so the lowest ratio is the best RMSE's
+        "val/rmse_ratio_constant_velocity_best": min(ratios) if ratios else math.nan,
+        "train_seconds": seconds,
+        "epochs": trainer.current_epoch,
+        "steps": trainer.global_step,
+        "study/number": trial.number,
+        "study/state": "pruned" if trial.pruned else "complete",
+        "study/pruned_at_step": trial.pruned_at,
+    }
+    logger.log_metrics({"study/pruned": float(trial.pruned)}, trainer.global_step)
+    report = {
+        **metrics,
+        "accuracy_curve": [list(point) for point in trained.accuracy_curve],
+        "best_checkpoint": trainer.checkpoint_callback.best_model_path or None,
+        "run_seconds": time.perf_counter() - started,
+    }
+    atomic_write_text(out_dir / "metrics.json", json.dumps(report, indent=2, default=str), True)
+    logger.finish()
+    state = f"pruned at step {trial.pruned_at}" if trial.pruned else "complete"
+    print(
+        f"\n== gripdem study trial {trial.number}: {state}, val/rmse_best "
+        f"{metrics['val/rmse_best']:.4g} m ({metrics['val/rmse_ratio_constant_velocity_best']:.3f}"
+        f" of CV) ==\noutputs: {out_dir}\n"
+    )
+    return report

@@ -35,6 +35,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -54,6 +55,10 @@ POLL_SECONDS = 0.2
 STOP_SECONDS = 20.0
 #: seconds the jobs get to answer a terminal's Ctrl-C themselves before they are sent SIGTERM
 CTRL_C_SECONDS = 5.0
+#: the jobs running now, over every call of :func:`launch_jobs` (a study launches its trials
+#: one per call, from several threads: :func:`stop_running_jobs` stops them all)
+_RUNNING: set[_Job] = set()
+_RUNNING_LOCK = threading.Lock()
 
 
 def plan_parallel(n_jobs: int | None, threads: int | None, uses_gpu: bool) -> tuple[int, int]:
@@ -119,7 +124,9 @@ class _Job:
 
     @property
     def label(self) -> str:
-        return f"#{self.number} : {' '.join(filter_overrides(self.overrides))}"
+        # a study trial's link to its study (study_trial.*) is the same for every trial
+        shown = [o for o in filter_overrides(self.overrides) if not o.startswith("study_trial.")]
+        return f"#{self.number} : {' '.join(shown)}"
 
     def start(self, threads: int) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -147,6 +154,8 @@ class _Job:
                 preexec_fn=_set_parent_death_signal if sys.platform.startswith("linux") else None,
             )
         self.started = time.perf_counter()
+        with _RUNNING_LOCK:
+            _RUNNING.add(self)
         print(f"job {self.label} started (log: {self.dir / 'console.log'})", flush=True)
 
     def show_progress(self) -> None:
@@ -155,6 +164,8 @@ class _Job:
             print(f"job #{self.number}: {line}", flush=True)
 
     def result(self, metric: str) -> JobReturn:
+        with _RUNNING_LOCK:
+            _RUNNING.discard(self)
         value, error = _return_value(self.dir, metric)
         minutes = (time.perf_counter() - self.started) / 60
         if error is None and self.process is not None and self.process.returncode != 0:
@@ -198,6 +209,13 @@ def _stop(jobs: list[_Job]) -> None:
             process.wait()
 
 
+def stop_running_jobs() -> None:
+    """SIGTERM to every job running now (SIGKILL after a grace), whichever call started it."""
+    with _RUNNING_LOCK:
+        jobs = list(_RUNNING)
+    _stop(jobs)
+
+
 def launch_jobs(
     hydra_context: Any,
     config: DictConfig,
@@ -221,11 +239,12 @@ def launch_jobs(
             job_config.hydra.job.num = number
         jobs.append(_Job(number, overrides, job_config))
     at_once = min(at_once, len(jobs))
-    print(
-        f"launching {len(jobs)} job(s), {at_once} at a time with {threads} torch thread(s) "
-        "each (hydra.launcher.n_jobs, torch_threads)",
-        flush=True,
-    )
+    if len(jobs) > 1:  # a study launches its trials one at a time: its own lines say more
+        print(
+            f"launching {len(jobs)} job(s), {at_once} at a time with {threads} torch thread(s) "
+            "each (hydra.launcher.n_jobs, torch_threads)",
+            flush=True,
+        )
     metric = str(config.get("optimized_metric", "val/rmse_best"))
     pending, running, results = list(jobs), [], {}
     try:

@@ -48,11 +48,18 @@ class SweepSummary(Callback):
             log.warning("no sweep summary: %s", exc)
             return
         jobs = collect(sweep_dir)
-        print(console_summary(jobs))
+        study = (sweep_dir / "study.md").exists()  # a study printed its best trials already
+        if not study:
+            print(console_summary(jobs))
         print(f"the full tables: {md} and {csv_path}")
         print(tensorboard_hint(sweep_dir))
         # a job failed: its error line (error.txt), or no metrics.json (it crashed)
         failed = [job for job in jobs if job.status != "ok"]
+        if failed and study:
+            # a trial killed with its study left a folder and ran again under a new number;
+            # the study's own table (study.md) says which trials failed and why
+            print(f"{len(failed)} trial folder(s) without a result: see {sweep_dir / 'study.md'}")
+            return
         if failed:
             named = "; ".join(
                 f"job {job.name} ({' '.join(f'{k}={v}' for k, v in job.params.items())}): "

@@ -30,6 +30,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from gripdem.data.windows import resolve_rollout_links
+from gripdem.provenance import available_cpus
 from gripdem.runner.config_schema import check_combination
 from gripdem.runner.console import report_error
 
@@ -136,13 +137,19 @@ class SweepPlan(Callback):
         if jobs is None:  # Optuna: trials chosen as it goes, each like the base config
             check_combination(config, notes=False)
             trials = int(config.hydra.sweeper.get("n_trials") or 1)
-            at_once = _jobs_at_once(config, int(config.hydra.sweeper.get("n_jobs") or 1))
+            n_jobs = config.hydra.sweeper.get("n_jobs")
+            study = str(config.hydra.sweeper.get("_target_")).endswith("StudySweeper")
+            if n_jobs is None and study:
+                n_jobs = available_cpus()  # the study sweeper: one trial per CPU
+            at_once = _jobs_at_once(config, int(n_jobs or 1))
             wall = trials * job_seconds(config) / at_once
             wall *= PARALLEL_SLOWDOWN if at_once > 1 else 1.0
+            pruned = study and config.hydra.sweeper.get("pruner") is not None
             print(
                 f"sweep: {trials} trials chosen by the sweeper as it goes, {at_once} at a time, "
-                f"about {_minutes(wall)} on a 2-core CPU like the one it was measured on "
-                "(at the base config's size)",
+                f"{'at most ' if pruned else ''}about {_minutes(wall)} on a 2-core CPU like "
+                "the one it was measured on (at the base config's size"
+                f"{'; pruned trials end sooner' if pruned else ''})",
                 flush=True,
             )
             return

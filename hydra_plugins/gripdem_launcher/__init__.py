@@ -1,3 +1,5 @@
-"""gripdem's Hydra launcher plugin: the jobs of a multirun side by side, each in its own process
-(the work is :mod:`gripdem.runner.parallel_launcher`; Hydra loads launcher classes from the
-``hydra_plugins`` namespace only, so this package holds the class and its config)."""
+"""gripdem's Hydra plugins: the parallel launcher (the jobs of a multirun side by side, each in
+its own process: :mod:`gripdem.runner.parallel_launcher`) and the study sweeper (stored,
+resumable, pruned, asynchronous Optuna studies: :mod:`gripdem.study.sweeper`). Hydra finds
+plugin classes in the ``hydra_plugins`` namespace only, so this package holds the classes and
+their configs; the work is in ``gripdem``."""

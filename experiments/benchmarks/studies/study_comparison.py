@@ -1,0 +1,202 @@
+"""Studies side by side: gripdem's study sweeper (stored, pruned, asynchronous) against the Hydra
+Optuna sweeper it replaced (in memory, every trial at its full budget, batches of ``n_jobs``), in
+the same wall time, same space and sampler seed; then each study's best setting retrained at the
+full budget with three seeds.
+
+Run (one after the other on the same machine; the old sweeper from a checkout of gripdem 0.2.0,
+commit 33196a0, in a virtualenv with its `sweep` extra: optuna 2.10 and hydra-optuna-sweeper):
+
+    # today's sweeper, stopped after 40 min
+    timeout --signal=TERM 2400 OLD/venv/bin/python -m gripdem.run hparams_search=optuna \\
+        hydra.sweeper.n_trials=400 hydra.sweep.dir=RUN/old
+    # gripdem's study sweeper, stopped after 40 min the same way
+    timeout --signal=TERM 2400 python -m gripdem.run hparams_search=optuna \\
+        hydra.sweeper.n_trials=400 hydra.sweeper.study_name=compare hydra.sweep.dir=RUN/new
+    # each study's best, retrained at the full budget (3640 steps), seeds 0-2
+    python experiments/benchmarks/studies/study_comparison.py --best RUN/old RUN/new
+    python -m gripdem.run -m seed=0,1,2 <its printed overrides> hydra.sweep.dir=RUN/retrain_old
+    python -m gripdem.run -m seed=0,1,2 <its printed overrides> hydra.sweep.dir=RUN/retrain_new
+    python experiments/benchmarks/studies/study_comparison.py --old RUN/old --new RUN/new \\
+        --retrained RUN/retrain_old RUN/retrain_new --wall-minutes 40 \\
+        [--out experiments/results/studies/study_comparison]
+
+A trial counts when it finished inside the wall time: the old sweeper's trials by their
+``metrics.json``, the new study's by its journal (complete and pruned; failed ones apart).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from pathlib import Path
+
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchlib import fmt, markdown_table, write_report  # noqa: E402
+
+#: the searched keys (conf/hparams_search/optuna.yaml)
+KEYS = (
+    "model.lr",
+    "model.encoder.channels",
+    "model.encoder.pair_channels",
+    "model.encoder.rounds",
+    "model.hidden",
+    "data.history_len",
+)
+
+
+def _overrides(folder: Path) -> dict[str, str]:
+    lines = yaml.safe_load((folder / ".hydra" / "overrides.yaml").read_text()) or []
+    return {k: v for k, _, v in (str(line).partition("=") for line in lines) if k in KEYS}
+
+
+def old_study(folder: Path) -> dict:
+    """The old sweeper's trials: a folder with metrics.json finished; others were cut off."""
+    finished, cut = [], 0
+    for trial in sorted(folder.glob("trial=*")):
+        metrics_file = trial / "metrics.json"
+        if not metrics_file.exists():
+            cut += 1
+            continue
+        metrics = json.loads(metrics_file.read_text())
+        finished.append((float(metrics["val/rmse_best"]), trial))
+    best_value, best_folder = min(finished, key=lambda pair: pair[0])
+    return {
+        "complete": len(finished),
+        "pruned": 0,
+        "failed": 0,
+        "cut off": cut,
+        "best": best_value,
+        "best trial": best_folder.name.split(",")[0],
+        "best overrides": _overrides(best_folder),
+    }
+
+
+def new_study(folder: Path) -> dict:
+    import optuna
+
+    from gripdem.study.storage import open_storage
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    journal = folder / "study.journal"
+    name = optuna.study.get_all_study_names(open_storage(str(journal)))[0]
+    study = optuna.load_study(study_name=name, storage=open_storage(str(journal)))
+    states = [t.state.name.lower() for t in study.trials]
+    best = study.best_trial
+    return {
+        "complete": states.count("complete"),
+        "pruned": states.count("pruned"),
+        "failed": states.count("fail"),
+        "cut off": states.count("running") + states.count("waiting"),
+        "best": best.value,
+        "best trial": f"trial={best.number}",
+        "best overrides": {
+            k: repr(v) if isinstance(v, float) else str(v) for k, v in best.params.items()
+        },
+    }
+
+
+def retrained(folder: Path) -> dict:
+    values, ratios, tests = [], [], []
+    for metrics_file in sorted(folder.glob("*/metrics.json")):
+        metrics = json.loads(metrics_file.read_text())
+        values.append(float(metrics["val/rmse_best"]))
+        ratios.append(float(metrics["test/rmse_ratio_constant_velocity"]))
+        tests.append(float(metrics["test/rmse_over_d"]))
+    return {"val": values, "test_ratio_cv": ratios, "test_over_d": tests}
+
+
+def _mean_std(values: list[float], digits: int = 4) -> str:
+    if not values:
+        return "–"
+    std = statistics.stdev(values) if len(values) > 1 else float("nan")
+    return f"{fmt(statistics.mean(values), digits)} ± {fmt(std, 2)} (n={len(values)})"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--best", nargs=2, type=Path, metavar=("OLD", "NEW"))
+    parser.add_argument("--old", type=Path)
+    parser.add_argument("--new", type=Path)
+    parser.add_argument("--retrained", nargs=2, type=Path, metavar=("OLD", "NEW"))
+    parser.add_argument("--wall-minutes", type=float, default=40.0)
+    parser.add_argument(
+        "--out", type=Path, default=Path("experiments/results/studies/study_comparison")
+    )
+    args = parser.parse_args()
+    if args.best:
+        for label, study in zip(
+            ("old", "new"), (old_study(args.best[0]), new_study(args.best[1])), strict=True
+        ):
+            print(label, " ".join(f"{k}={v}" for k, v in study["best overrides"].items()))
+        return
+    old, new = old_study(args.old), new_study(args.new)
+    again = [retrained(folder) for folder in args.retrained]
+    headers = [
+        "sweeper",
+        "trials finished",
+        "complete",
+        "pruned",
+        "failed",
+        "cut off at the end",
+        "best val RMSE (m)",
+        "best trial",
+        "retrained: val RMSE (m), 3 seeds",
+        "retrained: test ÷ CV",
+    ]
+    rows = []
+    for label, study, retrain in (
+        ("Hydra Optuna sweeper (0.2.0: in memory, no pruning, batches of 2)", old, again[0]),
+        ("gripdem study sweeper (journal, successive halving, asynchronous)", new, again[1]),
+    ):
+        rows.append(
+            [
+                label,
+                str(study["complete"] + study["pruned"]),
+                str(study["complete"]),
+                str(study["pruned"]),
+                str(study["failed"]),
+                str(study["cut off"]),
+                fmt(study["best"], 4),
+                study["best trial"],
+                _mean_std(retrain["val"]),
+                _mean_std(retrain["test_ratio_cv"], 3),
+            ]
+        )
+    finished = [(s["complete"] + s["pruned"]) for s in (old, new)]
+    ratio = finished[1] / finished[0]
+    means = [statistics.mean(r["val"]) for r in again]
+    text = (
+        f"Two studies of the default model's space (conf/hparams_search/optuna.yaml: six keys, "
+        f"TPE seed 1234, half the default budget per trial), each stopped after "
+        f"{args.wall_minutes:.0f} minutes on the machine of the header, one after the other. "
+        f"Trials finished in that time: {finished[1]} against {finished[0]}, **{ratio:.2f}x**. "
+        f"Each study's best setting retrained at the full budget (3640 steps) with seeds 0-2: "
+        f"validation RMSE {means[1]:.4g} m against {means[0]:.4g} m "
+        f"({'at least as good' if means[1] <= means[0] else 'worse'}; ratio "
+        f"{means[1] / means[0]:.3f}).\n\n"
+        + markdown_table(headers, rows)
+        + "\n\nBest settings: old "
+        + " ".join(f"{k}={v}" for k, v in old["best overrides"].items())
+        + "; new "
+        + " ".join(f"{k}={v}" for k, v in new["best overrides"].items())
+        + "."
+    )
+    write_report(
+        args.out,
+        text,
+        {
+            "old": old,
+            "new": new,
+            "retrained_old": again[0],
+            "retrained_new": again[1],
+            "trials_ratio": ratio,
+        },
+    )
+
+
+if __name__ == "__main__":
+    main()

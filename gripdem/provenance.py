@@ -33,6 +33,7 @@ import re
 import shlex
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -72,13 +73,19 @@ def available_cpus() -> int:
 
 
 def relative(argument: str) -> str:
-    """``argument`` with paths inside the repository made relative to it and the home folder
-    written ``~``.
+    """``argument`` with paths inside the repository made relative to it, the home folder
+    written ``~`` and the temporary folder ``$TMPDIR``.
 
     >>> relative(str(REPO / "experiments" / "results"))
     'experiments/results'
     """
-    for prefix, short in ((str(REPO) + "/", ""), (str(REPO), "."), (str(Path.home()) + "/", "~/")):
+    shorts = (
+        (str(REPO) + "/", ""),
+        (str(REPO), "."),
+        (str(Path.home()) + "/", "~/"),
+        (tempfile.gettempdir().rstrip("/") + "/", "$TMPDIR/"),
+    )
+    for prefix, short in shorts:
         argument = argument.replace(prefix, short)
     return argument
 

@@ -38,6 +38,9 @@ PRUNERS = {
     "successive halving (min = 1st validation, factor 2)": lambda: (
         optuna.pruners.SuccessiveHalvingPruner(min_resource=1, reduction_factor=2)
     ),
+    "successive halving (min = 1st validation, factor 4)": lambda: (
+        optuna.pruners.SuccessiveHalvingPruner(min_resource=1, reduction_factor=4)
+    ),
 }
 
 

@@ -1,7 +1,8 @@
 """A study as optuna-dashboard shows it, checked and photographed in a real browser.
 
     python experiments/release/dashboard_screenshot.py multirun/studies/gripdem/study.journal \\
-        [--study gripdem] [--out docs/assets/optuna_dashboard.png]
+        [--study gripdem] [--out experiments/figures/optuna_dashboard.png]
+    cp experiments/figures/optuna_dashboard.png docs/assets/
 
 Starts ``optuna-dashboard STORAGE`` (the command the how-to gives), opens the study's page in
 headless Chromium (Debian's ``chromium``, driven by ``pip install playwright``), checks that the
@@ -39,12 +40,19 @@ def wait_for(url: str, seconds: float = 60) -> None:
     raise SystemExit(f"optuna-dashboard did not answer at {url} within {seconds:.0f} s")
 
 
+def study_id(storage: str, name: str) -> int:
+    """The dashboard's number for the study ``name`` (its id in the storage)."""
+    from gripdem.study.storage import open_storage
+
+    return open_storage(storage).get_study_id_from_name(name)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("storage", help="the study's storage (journal file or URL)")
     parser.add_argument("--study", default="gripdem", help="the study's name")
     parser.add_argument(
-        "--out", type=Path, default=ROOT / "docs" / "assets" / "optuna_dashboard.png"
+        "--out", type=Path, default=ROOT / "experiments" / "figures" / "optuna_dashboard.png"
     )
     args = parser.parse_args(argv)
     from playwright.sync_api import sync_playwright
@@ -67,9 +75,8 @@ def main(argv: list[str] | None = None) -> int:
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=browser_path, headless=True)
             tab = browser.new_page(viewport={"width": 1400, "height": 1000})
-            tab.goto(f"{base}/dashboard")
-            tab.get_by_text(args.study, exact=False).first.click()
-            tab.wait_for_selector("text=Intermediate Values", timeout=60_000)
+            tab.goto(f"{base}/dashboard/studies/{study_id(args.storage, args.study)}")
+            tab.wait_for_selector("text=Best Trial", timeout=60_000)
             tab.wait_for_timeout(3000)  # the plots draw
             body = tab.inner_text("body")
             for expected in ("Complete", "Pruned"):

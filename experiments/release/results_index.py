@@ -48,6 +48,9 @@ QUESTIONS = {
     "dem_data": "Do the built-in scenes' datasets look like the physics they claim (the "
     "generator's validation: overlaps, flow profile, crossings, non-affine motion)?",
     "fine_tuning": "Which optimiser settings should fine-tuning use?",
+    "studies": "Do gripdem's hyperparameter studies (stored, pruned, asynchronous) find as good a "
+    "setting in less time than the sweeper they replaced, which pruner, and which storage "
+    "survives a kill?",
     "test_suite": "Do the tests' thresholds hold on every CPU path and thread count, and does a "
     "killed command leave anything behind?",
 }

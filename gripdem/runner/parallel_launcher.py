@@ -222,8 +222,10 @@ def launch_jobs(
     job_overrides: Sequence[Sequence[str]],
     initial_job_idx: int,
     n_jobs: int | None,
+    announce: bool = True,
 ) -> list[JobReturn]:
-    """Run the jobs, at most ``n_jobs`` at once; returns their results in job order."""
+    """Run the jobs, at most ``n_jobs`` at once; returns their results in job order
+    (``announce``: say how many and how, first)."""
     trainer = config.get("trainer", {})
     uses_gpu = str(trainer.get("accelerator", "cpu")) not in ("cpu", "auto") or bool(
         trainer.get("strategy")
@@ -239,7 +241,7 @@ def launch_jobs(
             job_config.hydra.job.num = number
         jobs.append(_Job(number, overrides, job_config))
     at_once = min(at_once, len(jobs))
-    if len(jobs) > 1:  # a study launches its trials one at a time: its own lines say more
+    if announce:  # a study launches its trials one at a time: its own lines say more
         print(
             f"launching {len(jobs)} job(s), {at_once} at a time with {threads} torch thread(s) "
             "each (hydra.launcher.n_jobs, torch_threads)",

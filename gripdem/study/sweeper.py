@@ -189,6 +189,7 @@ class StudyRun:
         )
         if _is_parallel_launcher(launcher):  # threads per trial: the CPUs shared out
             launcher.n_jobs = self.at_once
+            launcher.announce = False  # one trial per launch: the study's lines say more
 
     def _sampler(self, trials_so_far: int):
         """The configured sampler; its seed moved on by the trials the study holds, so that

@@ -29,6 +29,7 @@ ConfigStore.instance().store(
 class ParallelLauncher(Launcher):
     def __init__(self, n_jobs: Optional[int] = None) -> None:  # noqa: UP045
         self.n_jobs = n_jobs
+        self.announce = True  # a study sets False: it launches its trials one by one
         self.config: Optional[DictConfig] = None  # noqa: UP045
         self.hydra_context: Optional[HydraContext] = None  # noqa: UP045
 
@@ -44,7 +45,12 @@ class ParallelLauncher(Launcher):
 
         assert self.config is not None and self.hydra_context is not None
         return launch_jobs(
-            self.hydra_context, self.config, job_overrides, initial_job_idx, self.n_jobs
+            self.hydra_context,
+            self.config,
+            job_overrides,
+            initial_job_idx,
+            self.n_jobs,
+            announce=self.announce,
         )
 
 

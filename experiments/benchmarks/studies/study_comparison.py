@@ -78,25 +78,69 @@ def old_study(folder: Path) -> dict:
 def new_study(folder: Path) -> dict:
     import optuna
 
-    from gripdem.study.storage import open_storage
+    from gripdem.study.storage import count_trials, open_storage
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     journal = folder / "study.journal"
     name = optuna.study.get_all_study_names(open_storage(str(journal)))[0]
     study = optuna.load_study(study_name=name, storage=open_storage(str(journal)))
-    states = [t.state.name.lower() for t in study.trials]
+    counts = count_trials(study)
     best = study.best_trial
     return {
-        "complete": states.count("complete"),
-        "pruned": states.count("pruned"),
-        "failed": states.count("fail"),
-        "cut off": states.count("running") + states.count("waiting"),
+        "complete": counts.complete,
+        "pruned": counts.pruned,
+        # the trials running when the wall time ran out were failed and queued again: cut off
+        "failed": counts.failed - counts.retried,
+        "cut off": counts.retried + counts.running,
         "best": best.value,
         "best trial": f"trial={best.number}",
         "best overrides": {
             k: repr(v) if isinstance(v, float) else str(v) for k, v in best.params.items()
         },
     }
+
+
+def slot_time(folder: Path) -> list[list[str]]:
+    """Where the new study's trial slots went: trials by how they ended (complete, or pruned at
+    which step), their mean seconds from start to end, and their share of all trial seconds."""
+    import optuna
+
+    from gripdem.study.storage import open_storage
+
+    journal = str(folder / "study.journal")
+    name = optuna.study.get_all_study_names(open_storage(journal))[0]
+    study = optuna.load_study(study_name=name, storage=open_storage(journal))
+    groups: dict[str, list[float]] = {}
+    for trial in study.trials:
+        if trial.datetime_complete is None or trial.state.name == "FAIL":
+            continue
+        key = "complete" if trial.state.name == "COMPLETE" else f"pruned at step {trial.last_step}"
+        seconds = (trial.datetime_complete - trial.datetime_start).total_seconds()
+        groups.setdefault(key, []).append(seconds)
+    total = sum(sum(v) for v in groups.values())
+    order = sorted(groups, key=lambda k: (k == "complete", len(k), k))
+    return [
+        [k, str(len(groups[k])), fmt(statistics.mean(groups[k])), fmt(sum(groups[k]) / total)]
+        for k in order
+    ]
+
+
+def study_window(folder: Path) -> tuple[float, float]:
+    """Seconds since the epoch of a study's first trial folder and last finished file."""
+    trials = list(folder.glob("trial=*"))
+    ends = [p.stat().st_mtime for p in folder.glob("trial=*/*") if p.is_file()]
+    return min(p.stat().st_mtime for p in trials), max(ends)
+
+
+def mean_load(log: Path, window: tuple[float, float]) -> float:
+    """The mean 1-minute load average of a log of ``EPOCH LOAD1 LOAD5 ...`` lines (one every
+    10 s, from /proc/loadavg) inside ``window``."""
+    values = []
+    for line in log.read_text().splitlines():
+        parts = line.split()
+        if len(parts) >= 2 and window[0] <= float(parts[0]) <= window[1]:
+            values.append(float(parts[1]))
+    return statistics.mean(values) if values else float("nan")
 
 
 def retrained(folder: Path) -> dict:
@@ -123,6 +167,13 @@ def main() -> None:
     parser.add_argument("--new", type=Path)
     parser.add_argument("--retrained", nargs=2, type=Path, metavar=("OLD", "NEW"))
     parser.add_argument("--wall-minutes", type=float, default=40.0)
+    parser.add_argument(
+        "--loads",
+        nargs=2,
+        type=Path,
+        metavar=("OLD", "NEW"),
+        help="logs of /proc/loadavg taken every 10 s during each study (EPOCH LOAD1 ...)",
+    )
     parser.add_argument(
         "--out", type=Path, default=Path("experiments/results/studies/study_comparison")
     )
@@ -179,6 +230,19 @@ def main() -> None:
         f"({'at least as good' if means[1] <= means[0] else 'worse'}; ratio "
         f"{means[1] / means[0]:.3f}).\n\n"
         + markdown_table(headers, rows)
+        + (
+            "\n\nThe machine's mean 1-minute load average while each study ran (2 trials at a "
+            "time make 2; more is other work beside it): old "
+            f"{mean_load(args.loads[0], study_window(args.old)):.2f}, new "
+            f"{mean_load(args.loads[1], study_window(args.new)):.2f}."
+            if args.loads
+            else ""
+        )
+        + "\n\nThe validation RMSE of a setting is on its own validation windows, which "
+        "`data.history_len` changes (the two best settings differ in it): it is the studies' "
+        "objective, and the test ratio beside it compares the two out of sample."
+        + "\n\nWhere the new study's trial time went (start to end of each trial):\n\n"
+        + markdown_table(["ended", "trials", "mean s", "share of trial time"], slot_time(args.new))
         + "\n\nBest settings: old "
         + " ".join(f"{k}={v}" for k, v in old["best overrides"].items())
         + "; new "

@@ -12,12 +12,14 @@ commit 33196a0, in a virtualenv with its `sweep` extra: optuna 2.10 and hydra-op
     # gripdem's study sweeper, stopped after 40 min the same way
     timeout --signal=TERM 2400 python -m gripdem.run hparams_search=optuna \\
         hydra.sweeper.n_trials=400 hydra.sweeper.study_name=compare hydra.sweep.dir=RUN/new
+    # (more new studies, e.g. with hydra.sweeper.pruner.reduction_factor=4, the same way)
     # each study's best, retrained at the full budget (3640 steps), seeds 0-2
     python experiments/benchmarks/studies/study_comparison.py --best RUN/old RUN/new
     python -m gripdem.run -m seed=0,1,2 <its printed overrides> hydra.sweep.dir=RUN/retrain_old
     python -m gripdem.run -m seed=0,1,2 <its printed overrides> hydra.sweep.dir=RUN/retrain_new
     python experiments/benchmarks/studies/study_comparison.py --old RUN/old --new RUN/new \\
         --retrained RUN/retrain_old RUN/retrain_new --wall-minutes 40 \\
+        [--loads OLD_LOADAVG.log NEW_LOADAVG.log] \\
         [--out experiments/results/studies/study_comparison]
 
 A trial counts when it finished inside the wall time: the old sweeper's trials by their
@@ -160,35 +162,61 @@ def _mean_std(values: list[float], digits: int = 4) -> str:
     return f"{fmt(statistics.mean(values), digits)} ± {fmt(std, 2)} (n={len(values)})"
 
 
+def pruner_label(folder: Path) -> str:
+    """A new study's pruner, as it stored it (``SuccessiveHalvingPruner, reduction_factor 3``)."""
+    import json as _json
+
+    import optuna
+
+    from gripdem.study.storage import PRUNER_ATTR, open_storage
+
+    journal = str(folder / "study.journal")
+    name = optuna.study.get_all_study_names(open_storage(journal))[0]
+    record = optuna.load_study(study_name=name, storage=open_storage(journal)).user_attrs
+    pruner = _json.loads(record.get(PRUNER_ATTR, "null"))
+    if pruner is None:
+        return "no pruner"
+    factor = pruner["kwargs"].get("reduction_factor")
+    return f"{pruner['name']}" + (f", reduction factor {factor}" if factor else "")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--best", nargs=2, type=Path, metavar=("OLD", "NEW"))
+    parser.add_argument("--best", nargs="+", type=Path, metavar="STUDY")
     parser.add_argument("--old", type=Path)
-    parser.add_argument("--new", type=Path)
-    parser.add_argument("--retrained", nargs=2, type=Path, metavar=("OLD", "NEW"))
+    parser.add_argument("--new", nargs="+", type=Path, help="one or more new studies")
+    parser.add_argument(
+        "--retrained", nargs="+", type=Path, help="the retrained best of --old, then of each --new"
+    )
     parser.add_argument("--wall-minutes", type=float, default=40.0)
     parser.add_argument(
         "--loads",
-        nargs=2,
+        nargs="+",
         type=Path,
-        metavar=("OLD", "NEW"),
-        help="logs of /proc/loadavg taken every 10 s during each study (EPOCH LOAD1 ...)",
+        help="logs of /proc/loadavg taken every 10 s during each study, --old first",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("experiments/results/studies/study_comparison")
     )
     args = parser.parse_args()
-    if args.best:
-        for label, study in zip(
-            ("old", "new"), (old_study(args.best[0]), new_study(args.best[1])), strict=True
-        ):
-            print(label, " ".join(f"{k}={v}" for k, v in study["best overrides"].items()))
+    if args.best:  # the old study first, then new ones
+        studies = [old_study(args.best[0])] + [new_study(folder) for folder in args.best[1:]]
+        for folder, study in zip(args.best, studies, strict=True):
+            print(folder, " ".join(f"{k}={v}" for k, v in study["best overrides"].items()))
         return
-    old, new = old_study(args.old), new_study(args.new)
+    if len(args.retrained) != 1 + len(args.new):
+        raise SystemExit("--retrained: one folder for --old, then one per --new")
+    folders = [args.old, *args.new]
+    studies = [old_study(args.old)] + [new_study(folder) for folder in args.new]
+    labels = ["Hydra Optuna sweeper (0.2.0: in memory, no pruning, batches of 2)"] + [
+        f"gripdem study sweeper (journal, asynchronous; {pruner_label(folder)})"
+        for folder in args.new
+    ]
     again = [retrained(folder) for folder in args.retrained]
     headers = [
         "sweeper",
         "trials finished",
+        "÷ old",
         "complete",
         "pruned",
         "failed",
@@ -196,17 +224,20 @@ def main() -> None:
         "best val RMSE (m)",
         "best trial",
         "retrained: val RMSE (m), 3 seeds",
+        "retrained: val ÷ old's",
         "retrained: test ÷ CV",
     ]
+    finished = [s["complete"] + s["pruned"] for s in studies]
+    means = [statistics.mean(r["val"]) for r in again]
     rows = []
-    for label, study, retrain in (
-        ("Hydra Optuna sweeper (0.2.0: in memory, no pruning, batches of 2)", old, again[0]),
-        ("gripdem study sweeper (journal, successive halving, asynchronous)", new, again[1]),
+    for label, study, retrain, count, mean in zip(
+        labels, studies, again, finished, means, strict=True
     ):
         rows.append(
             [
                 label,
-                str(study["complete"] + study["pruned"]),
+                str(count),
+                f"{count / finished[0]:.2f}",
                 str(study["complete"]),
                 str(study["pruned"]),
                 str(study["failed"]),
@@ -214,50 +245,54 @@ def main() -> None:
                 fmt(study["best"], 4),
                 study["best trial"],
                 _mean_std(retrain["val"]),
+                f"{mean / means[0]:.3f}",
                 _mean_std(retrain["test_ratio_cv"], 3),
             ]
         )
-    finished = [(s["complete"] + s["pruned"]) for s in (old, new)]
-    ratio = finished[1] / finished[0]
-    means = [statistics.mean(r["val"]) for r in again]
-    text = (
-        f"Two studies of the default model's space (conf/hparams_search/optuna.yaml: six keys, "
-        f"TPE seed 1234, half the default budget per trial), each stopped after "
-        f"{args.wall_minutes:.0f} minutes on the machine of the header, one after the other. "
-        f"Trials finished in that time: {finished[1]} against {finished[0]}, **{ratio:.2f}x**. "
-        f"Each study's best setting retrained at the full budget (3640 steps) with seeds 0-2: "
-        f"validation RMSE {means[1]:.4g} m against {means[0]:.4g} m "
-        f"({'at least as good' if means[1] <= means[0] else 'worse'}; ratio "
-        f"{means[1] / means[0]:.3f}).\n\n"
-        + markdown_table(headers, rows)
-        + (
+    loads = ""
+    if args.loads:
+        values = [
+            f"{label.split(' (')[0]}{'' if i == 0 else f' #{i}'} "
+            f"{mean_load(log, study_window(folder)):.2f}"
+            for i, (label, log, folder) in enumerate(zip(labels, args.loads, folders, strict=True))
+        ]
+        loads = (
             "\n\nThe machine's mean 1-minute load average while each study ran (2 trials at a "
-            "time make 2; more is other work beside it): old "
-            f"{mean_load(args.loads[0], study_window(args.old)):.2f}, new "
-            f"{mean_load(args.loads[1], study_window(args.new)):.2f}."
-            if args.loads
-            else ""
+            "time make 2; more is other work beside it): " + ", ".join(values) + "."
         )
+    breakdown = "".join(
+        f"\n\nWhere the trial time of the study with {pruner_label(folder)} went (start to "
+        "end of each trial):\n\n"
+        + markdown_table(["ended", "trials", "mean s", "share of trial time"], slot_time(folder))
+        for folder in args.new
+    )
+    settings = "; ".join(
+        f"{label.split(' (')[0]}{'' if i == 0 else f' #{i}'}: "
+        + " ".join(f"{k}={v}" for k, v in study["best overrides"].items())
+        for i, (label, study) in enumerate(zip(labels, studies, strict=True))
+    )
+    text = (
+        f"Studies of the default model's space (conf/hparams_search/optuna.yaml: six keys, TPE "
+        f"seed 1234, half the default budget per trial), each stopped after "
+        f"{args.wall_minutes:.0f} minutes on the machine of the header, one after the other in "
+        "one session. *Trials finished* counts the trials that ended in that time (complete or "
+        "pruned); each study's best setting was then retrained at the full budget (3640 steps) "
+        "with seeds 0-2.\n\n"
+        + markdown_table(headers, rows)
+        + loads
         + "\n\nThe validation RMSE of a setting is on its own validation windows, which "
-        "`data.history_len` changes (the two best settings differ in it): it is the studies' "
-        "objective, and the test ratio beside it compares the two out of sample."
-        + "\n\nWhere the new study's trial time went (start to end of each trial):\n\n"
-        + markdown_table(["ended", "trials", "mean s", "share of trial time"], slot_time(args.new))
-        + "\n\nBest settings: old "
-        + " ".join(f"{k}={v}" for k, v in old["best overrides"].items())
-        + "; new "
-        + " ".join(f"{k}={v}" for k, v in new["best overrides"].items())
-        + "."
+        "`data.history_len` changes: it is the studies' objective, and the test ratio beside it "
+        "compares the settings out of sample." + breakdown + "\n\nBest settings: " + settings + "."
     )
     write_report(
         args.out,
         text,
         {
-            "old": old,
-            "new": new,
-            "retrained_old": again[0],
-            "retrained_new": again[1],
-            "trials_ratio": ratio,
+            "studies": [
+                {"label": label, **study, "retrained": retrain}
+                for label, study, retrain in zip(labels, studies, again, strict=True)
+            ],
+            "trials_ratio": [count / finished[0] for count in finished],
         },
     )
 

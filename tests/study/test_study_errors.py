@@ -28,7 +28,9 @@ def study(sweep: Path, *extra: str) -> subprocess.CompletedProcess:
 
 def error_line(proc: subprocess.CompletedProcess) -> str:
     assert proc.returncode == 1, proc.stdout[-2000:] + proc.stderr[-2000:]
-    errors = [line for line in (proc.stdout + proc.stderr).splitlines() if line.startswith("error:")]
+    errors = [
+        line for line in (proc.stdout + proc.stderr).splitlines() if line.startswith("error:")
+    ]
     assert len(errors) == 1, proc.stdout + proc.stderr
     return errors[0]
 

@@ -153,6 +153,35 @@ def pytest_xdist_auto_num_workers(config) -> int:
     return max(1, min(4, available or 1))
 
 
+#: Test modules whose tests share one costly module fixture (a sweep, a wheel, a trained
+#: model): under pytest-xdist each is sent whole to one worker, which makes the fixture once
+#: (sent test by test, two workers made it twice: 27 s of the suite for the TensorBoard sweep).
+ONE_WORKER_MODULES = (
+    "tests/runner/test_tensorboard.py",
+    "tests/runner/test_finetune.py",
+    "tests/test_wheel.py",
+)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``-n``'s default distribution (``load``: test by test to whichever worker is free), but
+    the tests of each of ONE_WORKER_MODULES as one unit. This is what ``--dist loadgroup`` with
+    an ``xdist_group`` mark does, but pytest 9.2 drops the mark's node-id suffix that loadgroup
+    reads (pytest-xdist issue 1386), so the controller groups by path itself. Another ``--dist``
+    given on the command line is left to xdist."""
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class OneWorkerModules(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = nodeid.split("::", 1)[0]
+            return path if path in ONE_WORKER_MODULES else nodeid
+
+    return OneWorkerModules(config, log)
+
+
 def _tiny_dataset(scene: str, root: Path) -> Path:
     cfg = compose_simulate([f"scene={scene}", "preset=tiny"])
     return ensure_scene_dataset(

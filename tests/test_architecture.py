@@ -93,3 +93,16 @@ def test_the_clis_help_imports_neither_torch_nor_lightning():
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout[-500:]
+
+
+def test_the_modules_sent_whole_to_one_test_worker_exist():
+    """tests/conftest.py's ONE_WORKER_MODULES name test files by path: a renamed file would
+    silently be spread over the workers again (its fixture made once per worker)."""
+    conftest = ast.parse((ROOT / "tests" / "conftest.py").read_text())
+    (value,) = [
+        node.value
+        for node in conftest.body
+        if isinstance(node, ast.Assign) and ast.unparse(node.targets[0]) == "ONE_WORKER_MODULES"
+    ]
+    modules = ast.literal_eval(value)
+    assert modules and all((ROOT / path).is_file() for path in modules), modules

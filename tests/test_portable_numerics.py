@@ -3,9 +3,11 @@ a few hundred optimiser steps get) run once more with ATen's plain ``default`` k
 this machine has, so that a threshold tuned to one CPU cannot land again.
 
 ``experiments/analyses/threshold_spread.py`` measures every numeric check of the suite under
-ATEN_CPU_CAPABILITY = default | avx2 | avx512 and 1 | 2 threads; the checks it finds moving are
-marked ``numerics`` (pyproject.toml), and this test runs them under the combination that differs
-most from the common developer machine (AVX-512): no vector unit at all.
+ATEN_CPU_CAPABILITY = default | avx2 | avx512 and 1 | 2 threads; of the checks it finds moving,
+the binding case of each threshold is marked ``numerics`` (pyproject.toml: for the overfitting
+test's shared fold, the mode closest to it, ``BINDING_MODE`` in tests/models/test_module.py),
+and this test runs them under the combination that differs most from the common developer
+machine (AVX-512): no vector unit at all.
 """
 
 from __future__ import annotations

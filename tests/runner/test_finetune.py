@@ -25,7 +25,13 @@ def run(tmp_path, name, overrides):
     out = tmp_path / name
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(
-            "config", overrides=["experiment=smoke", f"logger.save_dir={out}", *overrides]
+            "config",
+            overrides=[
+                "experiment=smoke",
+                f"logger.save_dir={out}",
+                "outputs.figures=false",  # not read here (about half of a smoke run's time)
+                *overrides,
+            ],
         )
     return out, run_experiment(cfg, out)
 

@@ -24,6 +24,7 @@ def sweep_command(sweep: Path, *overrides: str) -> list[str]:
         "gripdem.run",
         "-m",
         "experiment=smoke",
+        "outputs.figures=false",  # not read here (about half of a smoke job's time)
         *overrides,
         f"hydra.sweep.dir={sweep}",
     ]

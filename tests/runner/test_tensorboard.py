@@ -71,7 +71,11 @@ def test_a_job_is_named_from_the_sweep_it_belongs_to(tmp_path):
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory, gripdem_data_root, tiny_pbc_path):
     """``-m split.horizon=5,20,20 model=vct experiment=smoke``: two horizons (the tag count
-    must not follow the horizon) and one value given twice (distinct runs, never merged)."""
+    must not follow the horizon) and one value given twice (distinct runs, never merged).
+    Hydra's basic launcher runs the jobs one after the other in the sweep's own process (one
+    Lightning import instead of four processes): what is read here, the names, hparams and
+    metrics, does not depend on the launcher (gripdem's own is tested in
+    test_parallel_launcher.py)."""
     root = tmp_path_factory.mktemp("tb") / "multirun"
     sweep_dir = root / "12-00-00"
     env = {**os.environ, "GRIPDEM_DATA": str(gripdem_data_root)}
@@ -79,7 +83,8 @@ def sweep(tmp_path_factory, gripdem_data_root, tiny_pbc_path):
     proc = subprocess.run(
         [
             *(sys.executable, "-m", "gripdem.run", "-m"),
-            *("split.horizon=5,20,20", "model=vct", "experiment=smoke"),
+            *("split.horizon=5,20,20", "model=vct", "experiment=smoke", "hydra/launcher=basic"),
+            "outputs.figures=false",  # not read here (about half of a smoke job's time)
             f"hydra.sweep.dir={sweep_dir}",
         ],
         env=env,

@@ -8,16 +8,25 @@ outcome counts.
 The install is not timed (it depends on the package index's cache); run it on a checkout whose
 ``.venv`` is set up. Writes ``OUT.md`` and ``OUT.json`` with the result header (date, commit,
 CPU model, threads, command).
+
+``--census`` adds where the time goes: each test's CPU time (its worker's and that of the
+processes it started), summed by test folder, the ten costliest tests, and every Python process
+the run started (how many imported torch and Lightning), from the pytest plugin and the
+``sitecustomize`` in ``suite_census/`` (``PYTHONPATH``; both do nothing outside a census).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import re
 import resource
 import subprocess
 import sys
+import tempfile
 import time
+from collections import defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -25,6 +34,74 @@ from benchlib import available_cpus, cpu_model, markdown_table, write_report  # 
 
 ROOT = Path(__file__).resolve().parents[3]
 OUTCOMES = ("passed", "failed", "skipped", "deselected", "xfailed", "errors")
+CENSUS = Path(__file__).resolve().parent / "suite_census"
+
+
+def test_group(nodeid: str) -> str:
+    """``tests/runner/test_x.py::t`` -> ``tests/runner``; a top-level file is its own group."""
+    parts = nodeid.split("::")[0].split("/")
+    return "/".join(parts[:2]) if len(parts) > 2 else parts[-1]
+
+
+def read_census(folder: Path, root_pid: int) -> dict:
+    """The tests' and processes' records of a census folder, summed; ``root_pid``: pytest's
+    own process (it and its xdist workers are not counted as processes the tests started)."""
+    tests = [json.loads(line) for p in folder.glob("tests-*.jsonl") for line in p.open()]
+    for test in tests:
+        test["total_cpu_s"] = test["cpu_s"] + test["children_cpu_s"]
+    groups: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
+    for test in tests:
+        groups[test_group(test["test"])][0] += 1
+        groups[test_group(test["test"])][1] += test["total_cpu_s"]
+
+    def by_tests(record: dict) -> bool:
+        return root_pid not in (record["pid"], record["ppid"])
+
+    started = [r for p in folder.glob("start-*.json") if by_tests(r := json.loads(p.read_text()))]
+    others = [r for p in folder.glob("end-*.json") if by_tests(r := json.loads(p.read_text()))]
+    return {
+        "tests": len(tests),
+        "tests_cpu_min": sum(t["total_cpu_s"] for t in tests) / 60,
+        "groups": {
+            name: {"tests": n, "cpu_min": cpu / 60}
+            for name, (n, cpu) in sorted(groups.items(), key=lambda kv: -kv[1][1])
+        },
+        "costliest": sorted(tests, key=lambda t: -t["total_cpu_s"])[:10],
+        "processes_started": len(started),
+        "processes_killed": len(started) - len(others),
+        "processes_lightning": sum(e["lightning"] for e in others),
+        "processes_torch": sum(e["torch"] for e in others),
+        "processes_cpu_min": sum(e["cpu_s"] for e in others) / 60,
+    }
+
+
+def census_text(census: dict) -> str:
+    groups = markdown_table(
+        ["test folder or file", "tests", "CPU-minutes"],
+        [[f"`{g}`", v["tests"], f"{v['cpu_min']:.2f}"] for g, v in census["groups"].items()],
+    )
+    costliest = markdown_table(
+        ["test", "CPU s (its processes')", "wall s"],
+        [
+            [
+                f"`{t['test']}`",
+                f"{t['total_cpu_s']:.1f} ({t['children_cpu_s']:.1f})",
+                f"{t['wall_s']:.1f}",
+            ]
+            for t in census["costliest"]
+        ],
+    )
+    return (
+        f"\n\n## Where the CPU time goes\n\n{census['tests']} tests, "
+        f"{census['tests_cpu_min']:.1f} CPU-minutes inside tests (the rest of the total is the "
+        "workers' start, collection and the session fixtures' first users' share).\n\n"
+        f"{groups}\n\nThe ten costliest tests (CPU time of the test and of the processes it "
+        f"started):\n\n{costliest}\n\nPython processes started by tests: "
+        f"{census['processes_started']} ({census['processes_killed']} killed before their exit "
+        f"was recorded); of those that exited, {census['processes_torch']} imported torch and "
+        f"{census['processes_lightning']} Lightning, {census['processes_cpu_min']:.1f} "
+        "CPU-minutes in all.\n"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,13 +109,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--out", type=Path, default=ROOT / "experiments/results/test_suite/test_command"
     )
+    parser.add_argument(
+        "--census", action="store_true", help="also record where the CPU time goes (slower)"
+    )
     args, pytest_args = parser.parse_known_args(argv)
     command = [sys.executable, "-m", "pytest", "-n", "auto", "-q", *pytest_args]
+    env = dict(os.environ)
+    census_dir = Path(tempfile.mkdtemp(prefix="suite-census-"))
+    if args.census:
+        command += ["-p", "census_plugin"]
+        env["GRIPDEM_CENSUS_DIR"] = str(census_dir)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(CENSUS), env.get("PYTHONPATH")]))
     start = time.perf_counter()
-    proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+    proc = subprocess.Popen(
+        command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    out, err = proc.communicate()
     wall = time.perf_counter() - start
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    summary = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else ""
+    summary = out.strip().splitlines()[-1] if out.strip() else ""
     counts = {k: int(n) for n, k in re.findall(r"(\d+) (\w+)", summary) if k in OUTCOMES}
     minutes, seconds = divmod(round(wall), 60)
     row = {
@@ -66,9 +155,13 @@ def main(argv: list[str] | None = None) -> int:
             ]
         ],
     )
-    write_report(args.out, f"The default test tier, install excluded.\n\n{table}", row)
+    text = f"The default test tier, install excluded.\n\n{table}"
+    if args.census:
+        row["census"] = read_census(census_dir, proc.pid)
+        text += census_text(row["census"])
+    write_report(args.out, text, row)
     if proc.returncode != 0:
-        print(proc.stdout[-4000:], proc.stderr[-2000:], sep="\n", file=sys.stderr)
+        print(out[-4000:], err[-2000:], sep="\n", file=sys.stderr)
     return proc.returncode
 
 

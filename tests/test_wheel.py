@@ -67,7 +67,8 @@ def test_the_installed_wheel_runs_from_another_folder(
     where = run("-c", "import gripdem.run as r; print(r.__file__, r.CONFIG_DIR)")
     assert where.split()[0].startswith(str(target)) and str(ROOT) not in where
     # the main command, in a multirun: each job is `python -m gripdem.run` of the wheel
-    out = run("-m", "gripdem.run", "-m", "model=vct", "experiment=smoke", "hydra.sweep.dir=sw")
+    out = run("-m", "gripdem.run", "-m", "model=vct", "experiment=smoke", "hydra.sweep.dir=sw",
+              "outputs.figures=false")  # fmt: skip
     job = elsewhere / "sw" / "scene=pbc,split=10-5,model=vct"  # one job: named by what it runs
     assert "launching 1 job(s)" in out and (job / "metrics.json").exists(), out[-2000:]
     run("-m", "gripdem.predict", "pretrained:lebc", str(tiny_lebc_path), "--out", "p.h5",

@@ -106,7 +106,7 @@ def test_a_killed_study_resumes_its_running_trials_once_and_pruned_trials_stop(
     proc = run(
         study_command(
             sweep,
-            "hydra.sweeper.n_trials=4",
+            "hydra.sweeper.n_trials=3",  # the kept trial and the two re-runs: no new one
             "hydra.sweeper.n_jobs=2",
             "hydra.sweeper.grace_seconds=3",
             *short,
@@ -127,8 +127,9 @@ def test_a_killed_study_resumes_its_running_trials_once_and_pruned_trials_stop(
     }
     assert sorted(retries) == [1, 2]
     assert all(retries[n].params == killed[n] for n in killed)
-    assert len(study.trials) == 6  # 0 kept, 1 and 2 failed, their two re-runs, one new
-    assert [t.state for t in study.trials if t.number not in killed] == [TrialState.PRUNED] * 4
+    assert len(study.trials) == 5  # 0 kept, 1 and 2 failed, their two re-runs (failed trials
+    # that were queued again do not count toward n_trials)
+    assert [t.state for t in study.trials if t.number not in killed] == [TrialState.PRUNED] * 3
     # a pruned trial stops training at once and says so in its folder and in TensorBoard
     for trial in study.trials:
         if trial.state != TrialState.PRUNED:
@@ -142,8 +143,8 @@ def test_a_killed_study_resumes_its_running_trials_once_and_pruned_trials_stop(
         assert [s.value for s in events.Scalars("study/pruned")] == [1.0]
     ranked = (sweep / "study.md").read_text()
     assert (
-        "4 pruned, 2 failed" not in ranked
-        and "0 complete, 4 pruned, 0 failed (2 more re-queued" in ranked
+        "3 pruned, 2 failed" not in ranked
+        and "0 complete, 3 pruned, 0 failed (2 more re-queued" in ranked
     )
 
 

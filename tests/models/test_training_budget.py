@@ -25,7 +25,7 @@ def test_step_budget_ends_the_schedule(tiny_pbc_path):
     assert lr < 0.01 * model.hparams.lr
 
 
-@pytest.mark.parametrize("seconds", [6])
+@pytest.mark.parametrize("seconds", [3])
 def test_time_budget_stops_training_and_decays_the_learning_rate(tiny_pbc_path, seconds):
     model, dm = smoke_model(tiny_pbc_path, "model.lr_schedule=cosine")
     model.train()

@@ -45,7 +45,8 @@ def test_group(nodeid: str) -> str:
 
 def read_census(folder: Path, root_pid: int) -> dict:
     """The tests' and processes' records of a census folder, summed; ``root_pid``: pytest's
-    own process (it and its xdist workers are not counted as processes the tests started)."""
+    own process (it and its xdist workers, which imported ``xdist.remote``, are not counted as
+    processes the tests started)."""
     tests = [json.loads(line) for p in folder.glob("tests-*.jsonl") for line in p.open()]
     for test in tests:
         test["total_cpu_s"] = test["cpu_s"] + test["children_cpu_s"]
@@ -54,11 +55,14 @@ def read_census(folder: Path, root_pid: int) -> dict:
         groups[test_group(test["test"])][0] += 1
         groups[test_group(test["test"])][1] += test["total_cpu_s"]
 
-    def by_tests(record: dict) -> bool:
-        return root_pid not in (record["pid"], record["ppid"])
-
-    started = [r for p in folder.glob("start-*.json") if by_tests(r := json.loads(p.read_text()))]
-    others = [r for p in folder.glob("end-*.json") if by_tests(r := json.loads(p.read_text()))]
+    ended = [json.loads(p.read_text()) for p in folder.glob("end-*.json")]
+    pytest_own = {root_pid} | {e["pid"] for e in ended if e.get("xdist_worker")}
+    started = [
+        r
+        for p in folder.glob("start-*.json")
+        if (r := json.loads(p.read_text()))["pid"] not in pytest_own
+    ]
+    others = [e for e in ended if e["pid"] not in pytest_own]
     return {
         "tests": len(tests),
         "tests_cpu_min": sum(t["total_cpu_s"] for t in tests) / 60,

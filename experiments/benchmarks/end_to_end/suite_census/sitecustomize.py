@@ -38,6 +38,8 @@ if _CENSUS:
                 "cpu_s": times.user + times.system,
                 "torch": "torch" in sys.modules,
                 "lightning": "lightning" in sys.modules,
+                # a pytest-xdist worker (pytest's own, not a process a test started)
+                "xdist_worker": "xdist.remote" in sys.modules,
             },
         )
 

@@ -22,6 +22,7 @@ import json
 import os
 import re
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -37,7 +38,7 @@ OUTCOMES = ("passed", "failed", "skipped", "deselected", "xfailed", "errors")
 CENSUS = Path(__file__).resolve().parent / "suite_census"
 
 
-def test_group(nodeid: str) -> str:
+def suite_group(nodeid: str) -> str:
     """``tests/runner/test_x.py::t`` -> ``tests/runner``; a top-level file is its own group."""
     parts = nodeid.split("::")[0].split("/")
     return "/".join(parts[:2]) if len(parts) > 2 else parts[-1]
@@ -52,8 +53,8 @@ def read_census(folder: Path, root_pid: int) -> dict:
         test["total_cpu_s"] = test["cpu_s"] + test["children_cpu_s"]
     groups: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
     for test in tests:
-        groups[test_group(test["test"])][0] += 1
-        groups[test_group(test["test"])][1] += test["total_cpu_s"]
+        groups[suite_group(test["test"])][0] += 1
+        groups[suite_group(test["test"])][1] += test["total_cpu_s"]
 
     ended = [json.loads(p.read_text()) for p in folder.glob("end-*.json")]
     pytest_own = {root_pid} | {e["pid"] for e in ended if e.get("xdist_worker")}
@@ -119,8 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     args, pytest_args = parser.parse_known_args(argv)
     command = [sys.executable, "-m", "pytest", "-n", "auto", "-q", *pytest_args]
     env = dict(os.environ)
-    census_dir = Path(tempfile.mkdtemp(prefix="suite-census-"))
-    if args.census:
+    census_dir = Path(tempfile.mkdtemp(prefix="suite-census-")) if args.census else None
+    if census_dir:
         command += ["-p", "census_plugin"]
         env["GRIPDEM_CENSUS_DIR"] = str(census_dir)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(CENSUS), env.get("PYTHONPATH")]))
@@ -160,8 +161,9 @@ def main(argv: list[str] | None = None) -> int:
         ],
     )
     text = f"The default test tier, install excluded.\n\n{table}"
-    if args.census:
+    if census_dir:
         row["census"] = read_census(census_dir, proc.pid)
+        shutil.rmtree(census_dir, ignore_errors=True)
         text += census_text(row["census"])
     write_report(args.out, text, row)
     if proc.returncode != 0:

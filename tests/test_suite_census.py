@@ -1,7 +1,7 @@
 """The test command's census (``experiments/benchmarks/end_to_end/test_command.py --census``):
-a real pytest run with the census plugin and ``sitecustomize`` on a two-test file, one test of
-which starts a Python process; the census finds both tests and that one process, and counts
-neither pytest nor its own processes as started by a test."""
+a real pytest run (one xdist worker) with the census plugin and ``sitecustomize`` on a two-test
+file, one test of which starts a Python process; the census finds both tests and that one
+process, and counts neither pytest nor its worker as started by a test."""
 
 from __future__ import annotations
 
@@ -31,13 +31,13 @@ def test_the_census_counts_the_tests_and_the_processes_they_start(tmp_path):
     folder.mkdir()
     (tmp_path / "test_inner.py").write_text(textwrap.dedent(INNER))
     env = {
-        **os.environ,
+        **{k: v for k, v in os.environ.items() if k != "PYTEST_XDIST_WORKER"},  # a run of its own
         "GRIPDEM_CENSUS_DIR": str(folder),
         "PYTHONPATH": os.pathsep.join(filter(None, [str(CENSUS), os.environ.get("PYTHONPATH")])),
     }
     proc = subprocess.Popen(
         [sys.executable, "-m", "pytest", "-q", "-p", "census_plugin", "-p", "no:cacheprovider",
-         "test_inner.py"],
+         "-n", "1", "test_inner.py"],  # one xdist worker, as the test command runs them
         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     out, err = proc.communicate(timeout=120)

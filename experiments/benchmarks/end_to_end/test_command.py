@@ -46,8 +46,8 @@ def suite_group(nodeid: str) -> str:
 
 def read_census(folder: Path, root_pid: int) -> dict:
     """The tests' and processes' records of a census folder, summed; ``root_pid``: pytest's
-    own process (it and its xdist workers, which imported ``xdist.remote``, are not counted as
-    processes the tests started)."""
+    own process (it and its xdist workers, its children with ``PYTEST_XDIST_WORKER`` set, are
+    not counted as processes the tests started)."""
     tests = [json.loads(line) for p in folder.glob("tests-*.jsonl") for line in p.open()]
     for test in tests:
         test["total_cpu_s"] = test["cpu_s"] + test["children_cpu_s"]
@@ -57,7 +57,9 @@ def read_census(folder: Path, root_pid: int) -> dict:
         groups[suite_group(test["test"])][1] += test["total_cpu_s"]
 
     ended = [json.loads(p.read_text()) for p in folder.glob("end-*.json")]
-    pytest_own = {root_pid} | {e["pid"] for e in ended if e.get("xdist_worker")}
+    pytest_own = {root_pid} | {
+        e["pid"] for e in ended if e["ppid"] == root_pid and e.get("xdist_env")
+    }
     started = [
         r
         for p in folder.glob("start-*.json")

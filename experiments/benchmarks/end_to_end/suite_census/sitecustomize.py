@@ -38,8 +38,9 @@ if _CENSUS:
                 "cpu_s": times.user + times.system,
                 "torch": "torch" in sys.modules,
                 "lightning": "lightning" in sys.modules,
-                # a pytest-xdist worker (pytest's own, not a process a test started)
-                "xdist_worker": "xdist.remote" in sys.modules,
+                # set in pytest-xdist's workers (and inherited by what their tests start: a
+                # worker is also a child of pytest's own process)
+                "xdist_env": "PYTEST_XDIST_WORKER" in os.environ,
             },
         )
 

@@ -1,9 +1,9 @@
-"""A sweep and its comparison: a Hydra multirun over two models, the summary table it writes,
-and the same numbers read back as TensorBoard shows them (runs named by what differs, HParams
-with the settings and the hp/ metrics). The mission's sweep is the same command at full size:
-``python -m gripdem.run -m split=190-10,100-100 model=vct``.
+"""A sweep and its comparison: a Hydra multirun over two decoder modes (GRIP++ and VCT), the
+summary table it writes, and the same numbers read back as TensorBoard shows them (runs named
+by what differs, HParams with the settings and the hp/ metrics). The mission's sweep is the
+same command at full size: ``python -m gripdem.run -m split=190-10,100-100 model=vct``.
 
-    python examples/sweep_tensorboard.py [--out OUT] [--models grip,contact]
+    python examples/sweep_tensorboard.py [--out OUT] [--models grip,vct]
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from gripdem.evaluation.tensorboard_runs import read_runs
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("outputs/examples/sweep"))
-    parser.add_argument("--models", default="grip,contact")
+    parser.add_argument("--models", default="grip,vct")
     args = parser.parse_args(argv)
 
     command = [

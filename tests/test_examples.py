@@ -74,7 +74,7 @@ def test_first_run_example(tmp_path, gripdem_data_root, tiny_pbc_path):
 def test_sweep_tensorboard_example(tmp_path, gripdem_data_root, tiny_pbc_path):
     out = run_example("sweep_tensorboard", gripdem_data_root, "--out", str(tmp_path / "sweep"))
     assert re.search(r"run sweep/model=grip \(model grip\): test RMSE / CV's [\d.]+", out)
-    assert re.search(r"run sweep/model=contact \(model contact\): test RMSE", out)
+    assert re.search(r"run sweep/model=vct \(model vct\): test RMSE / CV's [\d.]+", out)
 
 
 def test_the_readme_python_snippet_runs(tmp_path, gripdem_data_root):

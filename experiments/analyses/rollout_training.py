@@ -148,6 +148,13 @@ def measure(run: Path, windows: int) -> dict:
     return row
 
 
+def _order(value) -> tuple:
+    """Sort key of a row key's element: numbers by value (3 before 10), then the rest as text."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return (0, float(value), "")
+    return (1, 0.0, str(value))
+
+
 def summarise(rows: list[dict]) -> tuple[str, list]:
     groups: dict = {}
     for row in rows:
@@ -166,7 +173,7 @@ def summarise(rows: list[dict]) -> tuple[str, list]:
         ("correction_ms", "correction ms / frame", 2),
     )
     table = []
-    for key, members in sorted(groups.items(), key=lambda kv: tuple(map(str, kv[0]))):
+    for key, members in sorted(groups.items(), key=lambda kv: tuple(map(_order, kv[0]))):
         cells = list(key) + [len(members)]
         for name, _, digits in columns:
             values = np.array([m[name] for m in members], dtype=float)

@@ -154,8 +154,9 @@ def write_result(path: str | Path, text: str, fields: dict[str, Any] | None = No
 
 def write_report(stem: str | Path, text: str, data: Any, echo: bool = True) -> None:
     """``STEM.md`` (the header line, then the report) and ``STEM.json`` (the header's fields
-    under ``header`` beside the keys of ``data``, a mapping; other data under ``results``),
-    each written whole; then print the report (``echo``)."""
+    under ``header`` beside the keys of ``data``, a mapping; other data under ``results``; paths
+    written as :func:`relative` writes them), each written whole; then print the report
+    (``echo``)."""
     stem = Path(stem)
     fields = result_fields()
     write_result(stem.parent / f"{stem.name}.md", text, fields)
@@ -167,8 +168,8 @@ def write_report(stem: str | Path, text: str, data: Any, echo: bool = True) -> N
             "results": data,
         }
     )
-    atomic_write(
-        stem.parent / f"{stem.name}.json", json.dumps(payload, indent=1, default=str) + "\n"
-    )
+    # paths in the data (arguments, inputs) as the header writes them: no folder of this machine
+    text_json = relative(json.dumps(payload, indent=1, default=str))
+    atomic_write(stem.parent / f"{stem.name}.json", text_json + "\n")
     if echo:
         print(text)

@@ -135,6 +135,21 @@ def test_surrogate_rollout_quick(run_script, tmp_path):
         "ensemble_ablation", "--row", rows[0], "--row", rows[1], "--out", str(tmp_path / "ablation")
     )
     assert "worst 20-frame block" in table and table.count("| pbc |") == 2
+    # several seeds side by side: the same report twice is one value with no spread
+    out = analysis(
+        "surrogate_seeds", "--group", "twice", str(report_path), str(report_path),
+        "--group", "once", str(report_path), "--out", str(tmp_path / "seeds"),
+    )  # fmt: skip
+    seeds = json.loads((tmp_path / "seeds.json").read_text())
+    for scene in ("pbc", "lebc", "pbc (reference)", "lebc (reference)"):
+        twice, once = seeds[scene]["twice"], seeds[scene]["once"]
+        assert twice["gr_l1"] == 2 * once["gr_l1"] and len(once["msd_1"]) == 1
+        assert once["gr_l1"][0] == max(
+            b["gr_l1"]
+            for b in report["scenes"][scene]["blocks"]["blocks"]
+            + [b for m in report["scenes"][scene].get("member_blocks", []) for b in m]
+        )
+    assert "| pbc | g(r) L1 | 0.02 |" in out and " ± 0 (" in out
 
 
 def test_model_front_quick(run_script, tmp_path):

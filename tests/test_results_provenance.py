@@ -146,3 +146,26 @@ def test_the_figure_pattern_reads_the_units_users_write():
         assert FIGURE.search(text), text
     for text in ("5e-6 s", "190-10", "2000 particles", "1e-3 d", "v0.2.0"):
         assert not FIGURE.search(text), text
+
+
+def test_a_report_names_no_folder_of_the_machine_in_its_data(tmp_path):
+    """``write_report``'s JSON writes the paths in its data as its header does: the repository
+    relative, the home folder ``~`` and the temporary folder ``$TMPDIR``."""
+    import tempfile
+
+    from gripdem.provenance import write_report
+
+    data = {
+        "args": {
+            "checkpoint": str(Path.home() / "runs" / "best.ckpt"),
+            "out": str(Path(tempfile.gettempdir()) / "work" / "sr"),
+            "data": str(ROOT / "experiments" / "results" / "x.h5"),
+        }
+    }
+    write_report(tmp_path / "report", "# report\n", data, echo=False)
+    written = json.loads((tmp_path / "report.json").read_text())["args"]
+    assert written == {
+        "checkpoint": "~/runs/best.ckpt",
+        "out": "$TMPDIR/work/sr",
+        "data": "experiments/results/x.h5",
+    }

@@ -46,7 +46,7 @@ DEPTHS = (1e-3, 1e-4)
 #: the swept options a row is named by (the seed is averaged over)
 ROW_KEYS = (
     *("scene", "split", "model", "rollout_links", "rollout_loss", "rollout_target"),
-    *("rollout_start", "contact_loss", "history_noise", "history_len", "budget"),
+    *("rollout_start", "contact_loss", "history_noise", "history_len", "lr", "budget"),
 )
 
 
@@ -187,7 +187,7 @@ def summarise(rows: list[dict]) -> tuple[str, list]:
             cells.append(cell)
         table.append(cells)
     headers = ["scene", "split", "model", "links", "loss", "target", "start", "contact"]
-    headers += ["history noise", "history", "steps", "seeds"]
+    headers += ["history noise", "history", "lr", "steps", "seeds"]
     headers += [c[1] for c in columns]
     return markdown_table(headers, table), table
 

@@ -46,6 +46,21 @@ def test_time_vs_error_quick(run_script, tmp_path):
 def test_surrogate_quick(run_script, tmp_path):
     out = run_script("benchmarks/surrogate/surrogate_speed", "--json", str(tmp_path / "s.json"))
     report = json.loads((tmp_path / "s.json").read_text())
+    # several runs side by side: the median of each group, every run in brackets
+    speed = tmp_path / "speed"
+    proc = subprocess.run(
+        [sys.executable, str(Path(__file__).parents[1] / "experiments/analyses/speed_runs.py"),
+         "--group", "a", str(tmp_path / "s.json"), str(tmp_path / "s.json"),
+         "--group", "b", str(tmp_path / "s.json"), "--out", str(speed)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    runs = json.loads(speed.with_suffix(".json").read_text())["rows"]
+    assert {(r["scene"], r["particles"]) for r in runs} == {
+        (r["scene"], r["particles"]) for r in report["rows"]
+    }
+    for row in runs:
+        assert len(row["a/over_dem"]) == 2 and row["a/over_dem"][0] == row["b/over_dem"][0] > 0
     assert {(r["scene"], r["particles"]) for r in report["rows"]} == {
         (s, n) for s in ("pbc", "lebc") for n in (400, 1600)
     }
@@ -150,6 +165,15 @@ def test_surrogate_rollout_quick(run_script, tmp_path):
             + [b for m in report["scenes"][scene].get("member_blocks", []) for b in m]
         )
     assert "| pbc | g(r) L1 | 0.02 |" in out and " ± 0 (" in out
+    # chosen entries, relabelled, in the order given
+    analysis(
+        "surrogate_seeds", "--group", "one", str(report_path),
+        "--entry", "pbc (reference)=pbc, deterministic", "--entry", "pbc=pbc, ensemble",
+        "--out", str(tmp_path / "entries"),
+    )  # fmt: skip
+    entries = json.loads((tmp_path / "entries.json").read_text())
+    assert [k for k in entries if k != "header"] == ["pbc, deterministic", "pbc, ensemble"]
+    assert entries["pbc, ensemble"]["one"] == seeds["pbc"]["once"]
 
 
 def test_model_front_quick(run_script, tmp_path):

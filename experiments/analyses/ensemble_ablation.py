@@ -32,6 +32,27 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "experiments" / "benchmarks"))
 from benchlib import machine_line, markdown_table, write_report  # noqa: E402
 
+from gripdem.evaluation.rollout_stats import SURROGATE_TARGETS  # noqa: E402
+from gripdem.provenance import relative  # noqa: E402
+
+#: the targets the description line names: (key of SURROGATE_TARGETS, label)
+TARGET_LABELS = (
+    ("msd", "MSD within"),
+    ("coordination", "contacts within"),
+    ("profile", "profile within"),
+    ("gr_l1", "g(r) L1 at most"),
+    ("diffusion", "D within"),
+    ("overlap", "overlap at most"),
+    ("spread_skill", "spread/skill"),
+    ("rank_over_uniform", "rank bins"),
+)
+
+
+def _target(value) -> str:
+    """A target as the description line writes it: a bound, or a range ``low-high``."""
+    return f"{value[0]:g}-{value[1]:g}" if isinstance(value, tuple) else f"{value:g}"
+
+
 HEADERS = [
     "scene",
     "variant",
@@ -144,8 +165,8 @@ def main(argv: list[str] | None = None) -> None:
             blocks.add(entry["blocks"]["block"])
         rows.append([scene, label, *run_columns(metrics), *surrogate_columns(entry)])
         sources.append(
-            f"- {scene}, {label}: {metrics_path}"
-            + (f", {surrogate_path} [{entry_name}]" if entry else "")
+            f"- {scene}, {label}: {relative(metrics_path)}"
+            + (f", {relative(surrogate_path)} [{entry_name}]" if entry else "")
         )
     if len(blocks) > 1:
         raise SystemExit(f"error: the rows' surrogate runs use different blocks {sorted(blocks)}")
@@ -157,8 +178,11 @@ def main(argv: list[str] | None = None) -> None:
             "Ensemble ablation (seed 0 unless the row says; 190-10 test windows out of sample; "
             f"2000-frame surrogate runs on a new DEM simulation, worst {block}-frame block and "
             "worst member; dev.: the worst |model / truth - 1|). "
-            "Targets: MSD within 0.15, contacts 0.05, profile 0.03, g(r) L1 0.03, D 0.20, "
-            "overlap 1 %, spread/skill 0.8-1.2, rank bins 0.5-1.5.",
+            "Targets (`gripdem.evaluation.rollout_stats.SURROGATE_TARGETS`): "
+            + ", ".join(
+                f"{label} {_target(SURROGATE_TARGETS[key])}" for key, label in TARGET_LABELS
+            )
+            + ".",
             "",
             markdown_table(HEADERS, rows),
             "",

@@ -3,13 +3,16 @@ runs stay from the DEM, mean ± std over the seeds.
 
     python experiments/analyses/surrogate_seeds.py \\
         --group "one link" A.json B.json C.json --group "rollout-trained" D.json E.json F.json \\
+        [--entry "pbc (reference)=pbc, deterministic" ...]
         [--out experiments/results/rollout_training/surrogate_seeds]
 
 Each JSON is a ``surrogate_rollout.py`` report (one model per scene, the same truth for all). Per
 scene and group, each statistic's worst block (as the report's targets table reads it:
 ``surrogate_tables.worst_deviations``), the hand-back's largest distance of the fluctuation
 kinetic energy from the truth's, and the short-term RMSE / d at frames 10 and 100; mean ± std
-over the group's files, each file's value in brackets, in the order given.
+over the group's files, each file's value in brackets, in the order given. ``--entry
+NAME=LABEL`` shows only the named entries of the reports (a scene, or ``SCENE (reference)``: the
+deterministic model an ensemble's report rolls out beside it), each under its label.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "surrogate"))
-from benchlib import markdown_table, write_report  # noqa: E402
+from benchlib import add_group_option, group_files, markdown_table, write_report  # noqa: E402
 from surrogate_tables import worst_deviations  # noqa: E402
 
 from gripdem.evaluation.rollout_stats import SURROGATE_TARGETS  # noqa: E402
@@ -41,7 +44,9 @@ STATISTICS = (
     ("coordination", "contacts within 1.01 d", SURROGATE_TARGETS["coordination"]),
     ("profile", "flow profile", SURROGATE_TARGETS["profile"]),
     ("gr_l1", "g(r) L1", SURROGATE_TARGETS["gr_l1"]),
+    ("overlap", "overlapping particles (fraction, worst frame)", SURROGATE_TARGETS["overlap"]),
     ("drift_over_d", "uniform drift (d per frame)", None),
+    ("frames_above", "frames 1-100 with RMSE above CV's or AR's", None),
     ("handback", "hand-back fluctuation KE", None),
     ("rmse_10", "RMSE / d at frame 10", None),
     ("rmse_100", "RMSE / d at frame 100", None),
@@ -53,6 +58,13 @@ def scene_values(scene: dict) -> dict[str, float]:
     values = worst_deviations(scene)
     ratios = [h.get("fluctuation_ratio", math.inf) for h in scene["handback"]]
     values["handback"] = max(abs(r - 1.0) for r in ratios) if ratios else math.nan
+    values["overlap"] = max(scene["blocks"]["overlap_per_frame"]["model"])
+    rmse_all = scene["rmse_over_d"]
+    values["frames_above"] = sum(
+        1
+        for j, model in enumerate(rmse_all["model"][:100])
+        if model > min(rmse_all["constant_velocity"][j], rmse_all["linear_ar"][j])
+    )
     rmse = scene["rmse_over_d"]["model"]
     values["rmse_10"] = rmse[9] if len(rmse) >= 10 else math.nan
     values["rmse_100"] = rmse[99] if len(rmse) >= 100 else math.nan
@@ -69,25 +81,34 @@ def cell(values: list[float]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument(
-        "--group",
-        nargs="+",
-        action="append",
-        required=True,
-        metavar="LABEL FILE",
-        help="a label, then the surrogate_rollout.py JSON reports of its models",
-    )
+    add_group_option(parser, "the surrogate_rollout.py JSON reports of its models")
     parser.add_argument(
         "--out", type=Path, default=ROOT / "experiments/results/rollout_training/surrogate_seeds"
     )
+    parser.add_argument("--title", default="Long rollouts over seeds: worst block against the DEM")
+    parser.add_argument(
+        "--entry",
+        action="append",
+        default=[],
+        metavar="NAME=LABEL",
+        help="show only this entry of the reports, under LABEL (repeatable)",
+    )
     args = parser.parse_args(argv)
+    labels = {}
+    for item in args.entry:
+        name, sep, label = item.partition("=")
+        if not sep or not name or not label:
+            parser.error(f"--entry {item!r}: expected NAME=LABEL")
+        labels[name] = label
     groups = {}
-    for label, *files in args.group:
-        if not files:
-            parser.error(f"--group {label!r} names no report file")
-        reports = [json.loads(Path(f).read_text())["scenes"] for f in files]
+    for label, files in group_files(parser, args.group).items():
+        reports = [json.loads(f.read_text())["scenes"] for f in files]
+        if labels:
+            reports = [{labels[k]: v for k, v in r.items() if k in labels} for r in reports]
         groups[label] = reports
     scenes = sorted({name for reports in groups.values() for r in reports for name in r})
+    if labels:  # in the order the entries were given
+        scenes = [label for label in labels.values() if label in scenes]
     rows, data = [], {}
     for scene in scenes:
         data[scene] = {}
@@ -103,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                 data[scene].setdefault(group, {})[key] = series
             rows.append(row)
     text = (
-        "# Long rollouts over seeds: worst block against the DEM\n\n"
+        f"# {args.title}\n\n"
         "2000-frame surrogate runs of each model on the seed-777 DEM simulation "
         "(`experiments/benchmarks/surrogate/surrogate_rollout.py`, contact correction on); per "
         "statistic its worst block over the run: for a ratio to the truth's (MSD, RMS step, "

@@ -94,6 +94,28 @@ def markdown_table(headers: list[str], rows: list[list]) -> str:
 REPO = Path(__file__).resolve().parents[2]
 
 
+def add_group_option(parser, what: str) -> None:
+    """``--group LABEL FILE...`` (repeatable): a label, then ``what`` (the files of that group)."""
+    parser.add_argument(
+        "--group",
+        nargs="+",
+        action="append",
+        required=True,
+        metavar="LABEL FILE",
+        help=f"a label, then {what}",
+    )
+
+
+def group_files(parser, groups: list[list[str]]) -> dict[str, list[Path]]:
+    """The ``--group`` options as {label: files}; a group without files is a usage error."""
+    out = {}
+    for label, *files in groups:
+        if not files:
+            parser.error(f"--group {label!r} names no report file")
+        out[label] = [Path(f) for f in files]
+    return out
+
+
 def fmt(value: float, digits: int = 3) -> str:
     """A number for a table: ``digits`` significant digits, '–' for None/nan."""
     if value is None or (isinstance(value, float) and not np.isfinite(value)):

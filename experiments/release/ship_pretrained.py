@@ -198,9 +198,31 @@ def surrogate_lines(hparams: dict, surrogate: dict) -> list[str]:
         )
     cost = surrogate.get("member_cost_ms") or {}
     if cost:
-        parts = "; ".join(f"{name}: {ms:.2f}" for name, ms in cost.items())
+        parts = "; ".join(f"{name}: {ms:.2f}" for name, ms in sorted(cost.items()))
         lines += ["", f"ms per member and frame, interleaved in one run: {parts}"]
     return lines + [""]
+
+
+def chained(run: dict, hparams: dict) -> bool:
+    """Whether the test chained links shorter than the split's horizon."""
+    link = hparams.get("horizon")
+    return link is not None and int(link) < int(run.get("horizon") or 0)
+
+
+def horizon_text(run: dict, hparams: dict) -> str:
+    """The split's horizon, and for a model of shorter links how it trained on them."""
+    text = f"horizon {run.get('horizon')}"
+    if not chained(run, hparams):
+        return text
+    text += f" in chained links of {hparams['horizon']} frames"
+    links = int(run.get("rollout_links") or 1)
+    if links > 1:
+        text += (
+            f"; rollout training: {links} links per window (loss {run.get('rollout_loss')}, "
+            f"target {run.get('rollout_target')}; the first link alone for the first "
+            f"{run.get('rollout_start')} of the budget)"
+        )
+    return text
 
 
 def markdown_card(
@@ -245,7 +267,7 @@ def markdown_card(
         "",
         f"- split {card['split']} ({run.get('protocol')} protocol: train/validation/test by "
         f"simulation{split_sims(data.get('split'))}), history "
-        f"{run.get('history_len')} frames, horizon {run.get('horizon')}",
+        f"{run.get('history_len')} frames, {horizon_text(run, hparams or {})}",
         f"- model `{run.get('model')}`: {encoder}, graph cut-off {run.get('graph_cutoff_d')} "
         "d, decoder "
         f"{run.get('decoder_mode')}, frame {run.get('frame')}, seed {run.get('seed')}",
@@ -253,7 +275,8 @@ def markdown_card(
         f"epochs), lr {run.get('lr')} ({run.get('lr_schedule')}), "
         f"{metrics.get('train_seconds', math.nan):.0f} s on 2 CPU cores",
         "",
-        "## Out-of-sample test (held-out simulations, 10-frame horizon)",
+        f"## Out-of-sample test (held-out simulations, {run.get('horizon')}-frame horizon"
+        + (", chained links with the contact correction)" if chained(run, hparams or {}) else ")"),
         "",
         "| | RMSE (m) | RMSE / d | model / this |",
         "|---|---|---|---|",
@@ -263,9 +286,14 @@ def markdown_card(
         if key in metrics:
             value = metrics[key]
             lines.append(f"| {label} | {value:.4g} | {value / d:.4g} | {model / value:.3f} |")
-    lines += ["", "RMSE at each horizon step / d:", ""]
     steps = sorted(k for k in metrics if k.startswith("test/rmse_step/"))
-    lines.append(" ".join(f"{metrics[k] / d:.2e}" for k in steps))
+    if len(steps) <= 10:
+        lines += ["", "RMSE at each horizon step / d:", ""]
+        lines.append(" ".join(f"{metrics[k] / d:.2e}" for k in steps))
+    else:  # step 1, then every tenth
+        shown = [steps[0], *steps[9::10]]
+        lines += ["", "RMSE / d at horizon steps " + ", ".join(str(int(k[-3:])) for k in shown)]
+        lines += ["", " ".join(f"{metrics[k] / d:.2e}" for k in shown)]
     if "test/crps_over_d" in metrics and ensemble:
         lines += [
             "",

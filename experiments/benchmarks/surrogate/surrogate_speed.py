@@ -31,7 +31,8 @@ side in one process:
   Fastest of several: the least disturbed by other jobs on a shared machine (the means are in
   the JSON). Without ``--checkpoint`` the model is the default model (``model=contact``,
   default preset) untrained: the same operations and time as a trained one. A checkpoint's
-  out-of-sample accuracy (190-10 RMSE / CV's, from its model card) is printed with it.
+  out-of-sample accuracy (test RMSE / CV's at the card's split, from its model card) is
+  printed with it.
 
 Peak resident memory of the model's prediction is measured; a size whose estimate (the
 smallest size's peak scaled with the particle count) exceeds ``--memory-budget-gb`` is
@@ -232,13 +233,15 @@ def lammps_frame(params, meta, positions, velocities, t, frames, threads, work) 
     )
 
 
-def card_accuracy(checkpoint: str) -> float | None:
-    """The model card's out-of-sample RMSE / CV's (None: no card, e.g. a Lightning file)."""
+def card_accuracy(checkpoint: str) -> tuple[float, str] | None:
+    """The model card's out-of-sample RMSE / CV's and the split it was tested at (None: no
+    card, e.g. a Lightning file)."""
     path = resolve(checkpoint)
     if not is_safetensors(path):
         return None
-    metrics = read_model_file(path)[2].get("metrics", {})
-    return metrics.get("test/rmse_ratio_constant_velocity")
+    card = read_model_file(path)[2]
+    ratio = card.get("metrics", {}).get("test/rmse_ratio_constant_velocity")
+    return None if ratio is None else (ratio, str(card.get("split", "?")))
 
 
 PART_LABELS = {
@@ -333,7 +336,9 @@ def main(argv: list[str] | None = None) -> dict:
             )
             print(f"{scene} {n}: {result}", flush=True)
         accuracy_text = (
-            "" if accuracy is None else f"; 190-10 test RMSE {accuracy:.3f} of CV's (model card)"
+            ""
+            if accuracy is None
+            else f"; {accuracy[1]} test RMSE {accuracy[0]:.3f} of CV's (model card)"
         )
         text = (
             f"### {scene}: {label}, history {k}, horizon {f}, precision {m['precision']}, "
@@ -364,7 +369,12 @@ def main(argv: list[str] | None = None) -> dict:
         )
         tables.append(text)
         report["scenes"].append(
-            {"scene": scene, "model": label, "table": text, "accuracy_over_cv": accuracy}
+            {
+                "scene": scene,
+                "model": label,
+                "table": text,
+                "accuracy_over_cv": None if accuracy is None else accuracy[0],
+            }
         )
     machine = machine_line()
     text = machine + "\n\n" + "\n\n".join(tables)

@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "surrogate"))
 from benchlib import add_group_option, group_files, markdown_table, write_report  # noqa: E402
-from surrogate_tables import worst_deviations  # noqa: E402
+from surrogate_tables import frames_above_baselines, worst_deviations  # noqa: E402
 
 from gripdem.evaluation.rollout_stats import SURROGATE_TARGETS  # noqa: E402
 
@@ -59,12 +59,7 @@ def scene_values(scene: dict) -> dict[str, float]:
     ratios = [h.get("fluctuation_ratio", math.inf) for h in scene["handback"]]
     values["handback"] = max(abs(r - 1.0) for r in ratios) if ratios else math.nan
     values["overlap"] = max(scene["blocks"]["overlap_per_frame"]["model"])
-    rmse_all = scene["rmse_over_d"]
-    values["frames_above"] = sum(
-        1
-        for j, model in enumerate(rmse_all["model"][:100])
-        if model > min(rmse_all["constant_velocity"][j], rmse_all["linear_ar"][j])
-    )
+    values["frames_above"] = frames_above_baselines(scene)
     rmse = scene["rmse_over_d"]["model"]
     values["rmse_10"] = rmse[9] if len(rmse) >= 10 else math.nan
     values["rmse_100"] = rmse[99] if len(rmse) >= 100 else math.nan

@@ -179,8 +179,8 @@ def markdown_card(
         "d, decoder "
         f"{run.get('decoder_mode')}, frame {run.get('frame')}, seed {run.get('seed')}",
         f"- {int(metrics.get('steps', 0))} optimiser steps ({int(metrics.get('epochs', 0))} "
-        f"epochs), lr {run.get('lr')} ({run.get('lr_schedule')}), "
-        f"{metrics.get('train_seconds', math.nan):.0f} s on 2 CPU cores",
+        f"epochs), lr {run.get('lr')} ({run.get('lr_schedule')}); training times, dated and with "
+        "their machine: the result files of `experiments/results/`",
         "",
         f"## Out-of-sample test (held-out simulations, {run.get('horizon')}-frame horizon"
         + (", chained links with the contact correction)" if chained(run, hparams or {}) else ")"),

@@ -54,16 +54,24 @@ def worst_deviations(scene: dict) -> dict[str, float]:
     return out
 
 
+def frames_above_baselines(scene: dict) -> int:
+    """Predicted frames (of the report's first ones, frames 1-100) where the model's RMSE is
+    above constant velocity's or the linear AR filter's."""
+    rm = scene["rmse_over_d"]
+    return sum(
+        1
+        for j, model in enumerate(rm["model"])
+        if model > min(rm["constant_velocity"][j], rm["linear_ar"][j])
+    )
+
+
 def targets(scene: dict, reference: dict | None = None) -> list[list]:
     """The surrogate's targets (``SURROGATE_TARGETS``), worst over the blocks and the members."""
     blocks = _all_blocks(scene)
     worst = worst_deviations(scene)
     model_overlap = max(scene["blocks"]["overlap_per_frame"]["model"])
-    rm = scene["rmse_over_d"]
-    n = len(rm["model"])
-    losses = sum(
-        1 for j in range(n) if rm["model"][j] > min(rm["constant_velocity"][j], rm["linear_ar"][j])
-    )
+    n = len(scene["rmse_over_d"]["model"])
+    losses = frames_above_baselines(scene)
     drift = worst["drift_over_d"]
     truth_drift = max(abs(b["truth/drift_over_d"]) for b in blocks)
     ratios = [h.get("fluctuation_ratio", math.inf) for h in scene["handback"]]

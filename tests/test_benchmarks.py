@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -196,3 +197,32 @@ def test_model_ab_speed_quick(run_script, tmp_path):
     for name, walls in report["walls_s"].items():
         assert len(walls) == 2 and min(walls) > 0
         assert 0 < sum(report["parts_s"][name].values()) <= min(walls) * 1.001
+
+
+def test_dem_cost_quick(run_script, tmp_path):
+    """Both engines from one state; a coarser DEM step costs fewer steps per frame."""
+    run_script(
+        "benchmarks/surrogate/dem_cost", "--steps-per-contact", "30", "20",
+        "--out", str(tmp_path / "c"),
+    )  # fmt: skip
+    report = json.loads((tmp_path / "c.json").read_text())
+    cells = {(c["scene"], c["steps_per_contact"]): c["rounds"][0] for c in report["cells"]}
+    assert set(cells) == {(s, k) for s in ("pbc", "lebc") for k in (30.0, 20.0)}
+    for scene in ("pbc", "lebc"):
+        fine, coarse = cells[(scene, 30.0)], cells[(scene, 20.0)]
+        assert coarse["dem"]["steps_per_frame"] < fine["dem"]["steps_per_frame"]
+        assert coarse["dem"]["dt"] > fine["dem"]["dt"]
+        assert fine["dem_us_per_particle_step"] > 0
+        if report["lammps"] is None:  # LAMMPS present: timed from the same state
+            assert fine["lammps_us_per_particle_step"] > 0
+    assert "µs per particle-step" in (tmp_path / "c.md").read_text()
+
+
+def test_dem_kernel_options_quick(run_script, tmp_path):
+    """Every variant compiles and runs from the same state; the shipped one is the reference
+    (no change) and the bit-identical option (no division checks) changes nothing."""
+    run_script("benchmarks/surrogate/dem_kernel_options", "--out", str(tmp_path / "k"))
+    report = json.loads((tmp_path / "k.json").read_text())
+    change = {v["variant"]: v["state_change_max"] for v in report["variants"]}
+    assert change["shipped"] == 0.0 and change["error_model numpy"] == 0.0
+    assert len(change) == 5 and all(np.isfinite(c) for c in change.values())

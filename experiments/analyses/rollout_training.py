@@ -1,7 +1,7 @@
 """Rollout training's ablation table: accuracy, training cost and the raw frames of trained runs.
 
     python experiments/analyses/rollout_training.py --runs RUN_DIR [RUN_DIR ...]
-        [--windows 8] [--out experiments/results/rollout_training/rollout_training]
+        [--windows 8] [--lean] [--out experiments/results/rollout_training/rollout_training]
 
 Each ``RUN_DIR`` is one ``python -m gripdem.run`` output folder (``metrics.json``,
 ``checkpoints/best.ckpt``, ``.hydra/config.yaml``), e.g. every job folder of a multirun
@@ -19,6 +19,11 @@ the seeds, each seed in brackets. Per row:
   (the truth's own count beyond 1e-4 d on the same frames beside), and, chained with the
   correction over the split's test windows, the pairs that reach the correction per frame and
   the correction's milliseconds per frame (one thread).
+
+Rows are also told apart by the training data's DEM step (``preset.steps_per_contact`` of
+the run's config: runs on data generated with another time step). ``--lean`` reads the runs'
+own files only (accuracy, training speed and minutes, the last frame's physics) and skips the
+raw frames and the corrected rollouts (which load every run's model and data).
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ DEPTHS = (1e-3, 1e-4)
 ROW_KEYS = (
     *("scene", "split", "model", "rollout_links", "rollout_loss", "rollout_target"),
     *("rollout_start", "contact_loss", "history_noise", "history_len", "lr", "budget"),
+    "steps_per_contact",
 )
 
 
@@ -115,12 +121,10 @@ def corrected_rollouts(model, dm) -> dict:
     return {"pairs_to_correction": reaching / frames, "correction_ms": 1e3 * seconds / frames}
 
 
-def measure(run: Path, windows: int) -> dict:
+def measure(run: Path, windows: int, lean: bool = False) -> dict:
     metrics = json.loads((run / "metrics.json").read_text())
     cfg = OmegaConf.load(run / ".hydra" / "config.yaml")
     hp = metrics["hparams"]
-    dm = build_datamodule(cfg, Path(metrics["data"]["path"]))
-    model = load_checkpoint_model(run / "checkpoints" / "best.ckpt")
     physics = "test/physics/{}/{}"
     # runs made before an option existed: its default
     before = {"rollout_links": 1, "rollout_start": 0.0, "contact_loss": 0.0, "history_noise": 0.0}
@@ -129,19 +133,27 @@ def measure(run: Path, windows: int) -> dict:
     if row["rollout_links"] == 1:  # one link: nothing is chained in training
         row.update(rollout_loss="–", rollout_target="–", rollout_start="–")
     row["budget"] = metrics["steps"]
+    row["steps_per_contact"] = OmegaConf.select(cfg, "preset.steps_per_contact", default="–")
     row.update(
         run=run.name,
         seed=hp["seed"],
         ratio_cv=metrics["test/rmse_ratio_constant_velocity"],
         ratio_ar=metrics["test/rmse_ratio_linear_ar"],
-        val_rmse_over_d=metrics["val/rmse_best"] / dm.meta.diameter,
+        val_rmse_over_d=metrics["val/rmse_best"]
+        * metrics["test/rmse_over_d"]
+        / metrics["test/rmse"],
         steps_per_s=metrics["steps"] / metrics["train_seconds"],
+        train_min=metrics["train_seconds"] / 60.0,
         overlap_last=metrics["hp/overlap_last_frame"],
         contacts=metrics[physics.format("model", "coordination_contact")]
         / metrics[physics.format("truth", "coordination_contact")],
         msd=metrics[physics.format("model", "msd_last_over_d2")]
         / metrics[physics.format("truth", "msd_last_over_d2")],
     )
+    if lean:
+        return row
+    dm = build_datamodule(cfg, Path(metrics["data"]["path"]))
+    model = load_checkpoint_model(run / "checkpoints" / "best.ckpt")
     with torch.no_grad():
         row.update(raw_frames(model, dm, windows))
         row.update(corrected_rollouts(model, dm))
@@ -164,6 +176,7 @@ def summarise(rows: list[dict]) -> tuple[str, list]:
         ("ratio_ar", "÷ AR", 3),
         ("val_rmse_over_d", "val RMSE / d", 3),
         ("steps_per_s", "steps / s", 3),
+        ("train_min", "training min", 2),
         ("overlap_last", "overlap % last", 2),
         ("contacts", "contacts ÷ truth", 3),
         ("msd", "MSD ÷ truth", 3),
@@ -172,6 +185,7 @@ def summarise(rows: list[dict]) -> tuple[str, list]:
         ("pairs_to_correction", "pairs to correction", 3),
         ("correction_ms", "correction ms / frame", 2),
     )
+    columns = tuple(c for c in columns if all(c[0] in row for row in rows))
     table = []
     for key, members in sorted(groups.items(), key=lambda kv: tuple(map(_order, kv[0]))):
         cells = list(key) + [len(members)]
@@ -187,7 +201,7 @@ def summarise(rows: list[dict]) -> tuple[str, list]:
             cells.append(cell)
         table.append(cells)
     headers = ["scene", "split", "model", "links", "loss", "target", "start", "contact"]
-    headers += ["history noise", "history", "lr", "steps", "seeds"]
+    headers += ["history noise", "history", "lr", "steps", "DEM steps per contact", "seeds"]
     headers += [c[1] for c in columns]
     return markdown_table(headers, table), table
 
@@ -196,20 +210,36 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=Path, nargs="+", required=True)
     parser.add_argument("--windows", type=int, default=8)
+    parser.add_argument("--lean", action="store_true", help="the runs' own files only")
+    parser.add_argument("--title", default=None, help="a first line of the report")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    rows = [measure(run, args.windows) for run in args.runs if (run / "metrics.json").exists()]
+    runs = [run for run in args.runs if (run / "metrics.json").exists()]
+    rows = [measure(run, args.windows, args.lean) for run in runs]
     table, _ = summarise(rows)
+    if args.lean:
+        what = (
+            "Test RMSE over CV's and AR's at the split's horizon (out of sample, chained with "
+            "the contact correction), training speed and minutes, the last frame's physics over "
+            "the truth's; mean ± std over seeds, each seed in brackets. Steps per second and "
+            "minutes"
+        )
+    else:
+        what = (
+            "Rollout training: test RMSE over CV's and AR's at the split's horizon (out of "
+            "sample, chained with the contact correction), training speed, the last frame's "
+            "physics over the truth's, and the raw frames before any correction (one link from "
+            f"{args.windows} starts of the test simulations) beside the truth's; mean ± std over "
+            "seeds, each seed in brackets. The validation RMSE is on each run's own validation "
+            "windows (as many links as it trains): compare it only between rows of the same "
+            "links. Steps per second"
+        )
     text = (
-        "Rollout training: test RMSE over CV's and AR's at the split's horizon (out of sample, "
-        "chained with the contact correction), training speed, the last frame's physics over "
-        "the truth's, and the raw frames before any correction (one link from "
-        f"{args.windows} starts of the test simulations) beside the truth's; mean ± std over "
-        "seeds, each seed in brackets. The validation RMSE is on each run's own validation "
-        "windows (as many links as it trains): compare it only between rows of the same links. "
-        "Steps per second: each run's own, two runs side by side on the machine of the header "
-        "(shared with other work at times: read them as rough).\n\n" + table
+        (f"{args.title}\n\n" if args.title else "")
+        + what
+        + ": each run's own, two runs side by side on the machine of the header (shared with "
+        "other work at times: read them as rough).\n\n" + table
     )
     if args.out:
         write_report(args.out, text, rows)

@@ -207,11 +207,15 @@ def load_yaml(group: str, name: str) -> dict:
     return yaml.safe_load((CONF / group / f"{name}.yaml").read_text())
 
 
-def scene_dataset(scene: str, preset: str) -> Path:
-    """The built-in dataset of ``scene`` (pbc | lebc) and ``preset`` (tiny | default | paper)."""
+def scene_dataset(scene: str, preset: str, overrides: dict | None = None) -> Path:
+    """The built-in dataset of ``scene`` (pbc | lebc) and ``preset`` (tiny | default | paper),
+    with ``overrides`` of the preset's keys (e.g. ``{"steps_per_contact": 20}``), through the
+    dataset cache (generated where it lacks it)."""
     from gripdem.dem.output import ensure_scene_dataset
 
-    return ensure_scene_dataset(load_yaml("scene", scene), load_yaml("preset", preset))
+    return ensure_scene_dataset(
+        load_yaml("scene", scene), {**load_yaml("preset", preset), **(overrides or {})}
+    )
 
 
 def tiling(factor: int) -> tuple[int, int]:

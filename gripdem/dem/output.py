@@ -5,6 +5,7 @@ preset sizes, sims, seed, backend) and the generator version."""
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import time
@@ -12,8 +13,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import h5py
+
 from gripdem.data.cache import cached_file, content_key, data_root
-from gripdem.data.dataset_io import write_dataset
+from gripdem.data.dataset_io import read_str_attr, write_dataset
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.params import GENERATOR_VERSION
 from gripdem.dem.scenes import generate
@@ -115,7 +118,61 @@ def ensure_scene_dataset(
         f"scene {config.scene.name}) into {path.parent}"
     )
 
+    if not path.exists():
+        note = not_reused_note(config, path)
+        if note:
+            message = f"{note}\n{message}"
+
     def generate(target: Path) -> None:
         generate_dataset(config, target, progress=progress, workers=workers, device=device)
 
     return cached_file(path, generate, message)
+
+
+def not_reused_note(config: GeneratorConfig, path: Path) -> str | None:
+    """One line saying why a cached dataset of the same scene and preset (another key in
+    ``path``'s folder) is not reused for ``config``: what its provenance records differently
+    (generator version, spin-up, sizes, physics), the closest such file named; ``None`` when
+    the folder holds none."""
+    recorded = {"version": GENERATOR_VERSION, "parameters": config.to_dict()}
+    wanted = _flat(json.loads(json.dumps(recorded, default=str)))  # as the provenance stores it
+    closest: tuple[int, float, str, list[str]] | None = None
+    for other in path.parent.glob(f"{config.scene.name}-{config.preset.name}-*.h5"):
+        if other == path:
+            continue
+        try:
+            with h5py.File(other, "r") as f:
+                made = json.loads(read_str_attr(other, f, "provenance", "{}"))
+        except (OSError, ValueError) as exc:  # not ours, or being written
+            log.debug("cache sibling %s has no readable provenance: %s", other, exc)
+            continue
+        if not isinstance(made, dict):
+            continue
+        have = _flat({"version": made.get("version"), "parameters": made.get("parameters", {})})
+        differ = sorted(k for k in wanted.keys() | have.keys() if wanted.get(k) != have.get(k))
+        said = [f"{_label(k)} {have.get(k, '-')} -> {wanted.get(k, '-')}" for k in differ]
+        rank = (len(said), -other.stat().st_mtime, other.name, said)
+        if said and (closest is None or rank < closest):
+            closest = rank
+    if closest is None:
+        return None
+    _, _, name, said = closest
+    more = f" and {len(said) - 3} more" if len(said) > 3 else ""
+    return f"gripdem: not reusing the cached {name} ({', '.join(said[:3])}{more}): generating anew"
+
+
+def _flat(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        if isinstance(value, Mapping):
+            flat.update(_flat(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _label(key: str) -> str:
+    """``parameters.preset.spinup_time`` -> ``preset.spinup_time``; ``version`` -> its name."""
+    if key == "version":
+        return "generator version"
+    return key.removeprefix("parameters.")

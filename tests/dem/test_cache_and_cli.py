@@ -83,6 +83,43 @@ def test_generates_once_and_parallel_jobs_wait(tiny_nodes, tmp_path, monkeypatch
     assert len(calls) == 2  # another seed is another dataset
 
 
+def test_a_dataset_of_other_settings_is_not_reused_and_the_run_says_why(
+    tiny_pbc_path, tmp_path, monkeypatch, make_config, capsys, caplog
+):
+    """A cached file of the same scene and preset made with another spin-up (or another
+    generator version) is never picked up: its key differs, and the generation says in one
+    line which file it does not reuse and what differs."""
+    import shutil
+
+    made = make_config("pbc", sims=3)  # the fixture's settings
+    shutil.copy(tiny_pbc_path, tmp_path / tiny_pbc_path.name)
+    assert output.dataset_path(made, tmp_path).exists()
+    assert output.not_reused_note(made, output.dataset_path(made, tmp_path)) is None  # itself
+    longer = make_config("pbc", sims=3, spinup_time=2 * made.preset.spinup_time)
+    note = output.not_reused_note(longer, output.dataset_path(longer, tmp_path))
+    assert note is not None and "\n" not in note
+    assert tiny_pbc_path.name in note and "preset.spinup_time" in note and "anew" in note
+    assert f"{made.preset.spinup_time:g} -> {longer.preset.spinup_time:g}" in note
+
+    monkeypatch.setattr(output, "GENERATOR_VERSION", "999")
+    note = output.not_reused_note(made, output.dataset_path(made, tmp_path))
+    assert note is not None and "generator version 1 -> 999" in note
+    assert "preset.spinup_time" not in note  # only what differs
+
+    calls: list = []
+    monkeypatch.setattr(output, "generate_dataset", _fake_generator(calls))
+    caplog.set_level("INFO", logger=cache.__name__)
+    d = made.to_dict()
+    path = output.ensure_scene_dataset(
+        d["scene"], d["preset"], sims=3, root=tmp_path, progress=False
+    )
+    assert calls == [path] and path.name != tiny_pbc_path.name  # generated anew, not reused
+    said = capsys.readouterr().out.splitlines() + "\n".join(caplog.messages).splitlines()
+    assert sum("not reusing" in line for line in said) == 1  # one line, before the generation
+    assert said[0].startswith(f"gripdem: not reusing the cached {tiny_pbc_path.name}")
+    assert said[1].startswith("gripdem: generating dataset")
+
+
 def test_fixture_datasets_live_in_the_cache(tiny_pbc_path, tiny_lebc_path):
     assert tiny_pbc_path.name.startswith("pbc-tiny-") and tiny_pbc_path.suffix == ".h5"
     assert tiny_lebc_path.parent == tiny_pbc_path.parent

@@ -118,15 +118,10 @@ def ensure_scene_dataset(
         f"scene {config.scene.name}) into {path.parent}"
     )
 
-    if not path.exists():
-        note = not_reused_note(config, path)
-        if note:
-            message = f"{note}\n{message}"
-
     def generate(target: Path) -> None:
         generate_dataset(config, target, progress=progress, workers=workers, device=device)
 
-    return cached_file(path, generate, message)
+    return cached_file(path, generate, message, lambda: not_reused_note(config, path))
 
 
 def not_reused_note(config: GeneratorConfig, path: Path) -> str | None:

@@ -138,15 +138,17 @@ def not_reused_note(config: GeneratorConfig, path: Path) -> str | None:
         try:
             with h5py.File(other, "r") as f:
                 made = json.loads(read_str_attr(other, f, "provenance", "{}"))
-        except (OSError, ValueError) as exc:  # not ours, or being written
+            modified = other.stat().st_mtime
+        except (OSError, ValueError) as exc:  # not ours, being written, or just removed
             log.debug("cache sibling %s has no readable provenance: %s", other, exc)
             continue
-        if not isinstance(made, dict):
+        parameters = made.get("parameters") if isinstance(made, dict) else None
+        if not isinstance(parameters, Mapping):
             continue
-        have = _flat({"version": made.get("version"), "parameters": made.get("parameters", {})})
+        have = _flat({"version": made.get("version"), "parameters": parameters})
         differ = sorted(k for k in wanted.keys() | have.keys() if wanted.get(k) != have.get(k))
         said = [f"{_label(k)} {have.get(k, '-')} -> {wanted.get(k, '-')}" for k in differ]
-        rank = (len(said), -other.stat().st_mtime, other.name, said)
+        rank = (len(said), -modified, other.name, said)
         if said and (closest is None or rank < closest):
             closest = rank
     if closest is None:

@@ -39,17 +39,24 @@ from surrogate_speed import (  # noqa: E402
 from gripdem.data.dataset_io import read_meta  # noqa: E402
 
 
+def restart_state(scene: str, preset: str, work: Path) -> tuple:
+    """The last frame of the preset's dataset's last (test) simulation, ready to restart an
+    engine: ``(meta, generator parameters, (positions, velocities, time))``."""
+    data_path = scene_dataset(scene, preset)
+    meta0 = read_meta(data_path)
+    # the last two frames (a file holds at least two); the engines start from the last
+    meta, observed, times, vel, params = tiled_state(
+        data_path, meta0.n_sims - 1, meta0.n_frames - 2, 2, 1, work
+    )
+    return meta, params, (observed[0, -1], vel, float(times[0, -1]))
+
+
 def cost_row(
     scene: str, preset: str, steps_per_contact: float, frames: int, lammps: bool, work: Path
 ) -> dict:
     """Both engines from the last frame of the preset's dataset's last (test) simulation."""
-    data_path = scene_dataset(scene, preset)
-    meta0 = read_meta(data_path)
-    sim = meta0.n_sims - 1
-    # the last two frames (a file holds at least two); both engines start from the last
-    meta, observed, times, vel, params = tiled_state(data_path, sim, meta0.n_frames - 2, 2, 1, work)
+    meta, params, state = restart_state(scene, preset, work)
     params = {**params, "preset": {**params["preset"], "steps_per_contact": steps_per_contact}}
-    state = (observed[0, -1], vel, float(times[0, -1]))
     dem = dem_per_frame(params, meta, *state, frames)
     lmp = lammps_frame(params, meta, *state, frames, 1, work) if lammps else None
     per_step = dem["steps_per_frame"] * meta.n_particles

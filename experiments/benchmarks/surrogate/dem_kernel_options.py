@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # benchlib: it adds the groups
-from benchlib import fmt, machine_line, markdown_table, scene_dataset, write_report  # noqa: E402
-from surrogate_speed import engine_state, tiled_state  # noqa: E402
+from benchlib import fmt, machine_line, markdown_table, write_report  # noqa: E402
+from dem_cost import restart_state  # noqa: E402
+from surrogate_speed import engine_state  # noqa: E402
 
 import gripdem.dem.engine as engine  # noqa: E402
-from gripdem.data.dataset_io import read_meta  # noqa: E402
 
 KERNELS = Path(engine.__file__).with_name("forces_numba.py")
 SHIPPED = "@numba.njit(cache=True)"
@@ -83,17 +83,12 @@ def main(argv: list[str] | None = None) -> dict:
     preset = "tiny" if args.quick else "default"
     if args.quick:
         args.frames, args.rounds = 1, 1
-    data_path = scene_dataset(args.scene, preset)
-    meta0 = read_meta(data_path)
     shipped = engine.forces_numba
     work = Path(__file__).resolve().parent / ".dem_kernel_options"
     work.mkdir(exist_ok=True)
     try:
-        meta, observed, times, vel, params = tiled_state(
-            data_path, meta0.n_sims - 1, meta0.n_frames - 2, 2, 1, work
-        )
+        meta, params, state = restart_state(args.scene, preset, work)
         config = engine_state(params, meta)
-        state = (observed[0, -1], vel, float(times[0, -1]))
         kernels = {name: load_variant(name, deco, work) for name, deco in VARIANTS.items()}
         walls: dict[str, list[float]] = {name: [] for name in VARIANTS}
         finals: dict[str, np.ndarray] = {}

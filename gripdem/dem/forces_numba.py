@@ -51,8 +51,14 @@ from gripdem.dem.params import (
     TANGENTIAL_MASS_FACTOR,
 )
 
+#: numba's fastmath flags of both kernels: fused multiply-adds, reassociation, reciprocals and
+#: signed zeros, not ``nnan``/``ninf`` (the runs' NaN and Inf checks must keep working); about a
+#: tenth of a step, the trajectory changed at the rounding level
+#: (experiments/results/dem_data/dem_kernel_options.md)
+FASTMATH = {"contract", "arcp", "nsz", "reassoc", "afn"}
 
-@numba.njit(cache=True)
+
+@numba.njit(cache=True, fastmath=FASTMATH)
 def compute_forces(
     pos,
     vel,
@@ -223,7 +229,7 @@ def compute_forces(
     return max_overlap
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=FASTMATH)
 def advance(
     pos,
     vel,

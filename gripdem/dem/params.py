@@ -20,7 +20,7 @@ from typing import Any
 
 #: Bump when a change of the generator changes its output for the same configuration: the
 #: dataset cache is keyed by this version and the configuration.
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"  # 2: the kernels with fastmath flags (0.3.0)
 GENERATOR_NAME = "gripdem.dem"
 
 # Indices into the packed force-law array (numba reads them as compile-time constants).

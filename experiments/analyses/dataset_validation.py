@@ -2,7 +2,7 @@
 figures of each scene's dataset of a preset, side by side.
 
     python experiments/analyses/dataset_validation.py [--preset default] [--scenes pbc lebc]
-        [--variant 'steps_per_contact=20' ...] [--out experiments/results/dem_data/dataset_validation]
+        [--variant 'KEY=VALUE ...' ...] [--out experiments/results/dem_data/dataset_validation]
 
 Reads the ``<dataset>.validation.json`` that ``python -m gripdem.simulate`` (and the first run
 that needs the dataset) writes beside it, generating the dataset first where the cache lacks it:

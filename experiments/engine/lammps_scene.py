@@ -11,8 +11,8 @@ GRANULAR package) runs the spin-up and then dumps every frame interval (``dump c
 LAMMPS files under ``DIR/<scene>/``). The script then reads the dataset back (gripdem's load
 checks) and prints frames, particles, x-face crossings, the largest frame-to-frame step, the
 mean-flow profile and, beside the built-in DEM's cached dataset of the same scene when there is
-one, the contact statistics. Time: about 4 minutes a scene on one loaded core (2000 particles,
-194 040 steps of 1.08e-8 s).
+one, the contact statistics. Time: about 3 minutes a scene on one loaded core (2000 particles,
+the default preset's 129 360 steps of 1.62e-8 s).
 
 Parameters (the built-in DEM's, :class:`gripdem.dem.config.GeneratorConfig`), how LAMMPS gets them:
 
@@ -37,8 +37,8 @@ rotational drag             ``fix viscous/sphere`` 8 pi mu r^3 toward rest; in t
 body force (pbc)            ``fix addforce`` m A cos(2 pi x / lx) along z, A = 5864.5 m/s^2
 shear (lebc)                ``fix deform xy erate 1000 remap v``: image velocity k lx, the
                             tilt is 0 at the start of the spin-up (gripdem's time origin)
-time step, frames           dt = 1.0823e-8 s (462 steps a frame), frame interval 5e-6 s,
-                            spin-up 220 frames (1.1 ms), then 201 frames
+time step, frames           the preset's dt (default 1.6234e-8 s: 308 steps a frame), frame
+                            interval 5e-6 s, spin-up 220 frames (1.1 ms), then 201 frames
 initial state               gripdem's packing (random insertion at phi 0.3, growth to 0.5)
                             and its initial velocities (the imposed mean flow)
 ==========================  ================================================================

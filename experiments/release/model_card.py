@@ -132,6 +132,13 @@ def horizon_text(run: dict, hparams: dict) -> str:
     return text
 
 
+def shipped_in(card: dict) -> str:
+    """``gripdem X`` (the release that ships the model), naming the version that trained it
+    when that differs."""
+    trained, shipped = card["gripdem_version"], card.get("shipped_in", card["gripdem_version"])
+    return f"gripdem {shipped}" + ("" if shipped == trained else f", trained by {trained}")
+
+
 def markdown_card(
     name: str, card: dict, size_bytes: int, n_weights: int, hparams: dict | None = None
 ) -> str:
@@ -152,8 +159,8 @@ def markdown_card(
     lines = [
         f"# pretrained:{name}",
         "",
-        f"The {what} of the `{card['scene']}` scene (gripdem "
-        f"{card['gripdem_version']}): `python -m gripdem.predict pretrained:{name} DATA.h5`, "
+        f"The {what} of the `{card['scene']}` scene ({shipped_in(card)}): "
+        f"`python -m gripdem.predict pretrained:{name} DATA.h5`, "
         f"or fine-tune with `python -m gripdem.run data.path=MINE.h5 scene={card['scene']} "
         + ("model=ensemble " if ensemble else "")
         + f"model.init_from=pretrained:{name}`. {n_weights:,} weights, {size_bytes / 1e6:.2f} MB, "
@@ -164,10 +171,13 @@ def markdown_card(
         f"- file `{data['file']}`: {data['simulations']} simulations x {data['frames']} frames x "
         f"{data['particles']} particles, boundary `{data['scene']['boundary']}`",
         f"- generator `{data['provenance'].get('generator')}` "
-        f"(version {data['provenance'].get('package_version', '?')}), seed "
+        f"(generator version {data['provenance'].get('version', '?')}, gripdem "
+        f"{data['provenance'].get('package_version', '?')}), seed "
         f"{params.get('seed')}, backend {params.get('backend')}",
         f"- preset `{preset.get('name')}`: frame interval {preset.get('frame_interval')} s, "
-        f"spin-up {preset.get('spinup_time')} s",
+        f"spin-up {preset.get('spinup_time')} s, DEM step "
+        f"{data['provenance'].get('derived', {}).get('dt', float('nan')):.3g} s "
+        f"({format(preset.get('steps_per_contact', float('nan')), 'g')} steps per contact time)",
         "- scene: " + ", ".join(f"{k} {v}" for k, v in sorted(scene_cfg.items())),
         "",
         "## Training",

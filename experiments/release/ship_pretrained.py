@@ -36,6 +36,7 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
+from gripdem._version import __version__
 from gripdem.data.dataset_io import read_meta
 from gripdem.data.h5io import atomic_write_text
 from gripdem.data.protocols import plan_windows
@@ -133,6 +134,7 @@ def ship(name: str, run_dir: Path, data: str | None, surrogate: str | None = Non
         summary = json.loads((Path(run_dir) / "metrics.json").read_text())["data"]
         card["training_data"]["split"] = {k: summary[k] for k in SPLIT_KEYS if k in summary}
     card["shipped_as"] = f"pretrained:{name}"
+    card["shipped_in"] = __version__  # the card's gripdem_version: the training run's
     if surrogate:
         card["surrogate"] = surrogate_card(surrogate, card["scene"])
     target = write_shipped(name, model, card)

@@ -166,7 +166,7 @@ class GeneratorConfig:
 
     def check_time_step(self) -> None:
         """Refuse a DEM step the explicit integrator cannot take
-        (docs/spec/dem.md#step-and-cost: dt ~ contact time / 30): fewer than
+        (docs/spec/dem.md#step-and-cost: dt ~ contact time / 20): fewer than
         :data:`MIN_STEPS_PER_CONTACT` steps per contact time, or a step above
         :data:`MAX_STEP_PER_DAMPING_TIME` of a damping time. The message names the option that
         sets the step and the coefficient that makes it too large."""

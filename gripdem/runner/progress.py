@@ -5,7 +5,7 @@ Lightning's own bar counts the batches of each epoch under ``Epoch 4/-2`` (a ste
 ``trainer.max_steps``, has no epoch count) and shows ``val/rmse: 0.000`` (metres, ~1e-8).
 :class:`StepBudgetBar` is one bar over the whole budget::
 
-    step 1200/3640  33%|███▎   | [02:10<04:20, 9.21step/s, train/loss=0.512, val rmse=0.00481 d,
+    step 800/2400  33%|███▎   | [00:40<01:20, 20.0step/s, train/loss=0.512, val rmse=0.00481 d,
     ÷CV=0.637]
 
 - ``step n/total``: optimiser steps done (``trainer.global_step``: a resumed run starts where

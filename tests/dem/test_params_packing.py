@@ -24,9 +24,9 @@ def test_default_scene_numbers_match_the_spec(make_config):
     assert cfg.mass == pytest.approx(2500 * math.pi * D**3 / 6)
     assert cfg.relaxation_time == pytest.approx(8.7e-7, rel=0.01)
     assert cfg.body_force_amplitude == pytest.approx(5.9e3, rel=0.01)
-    assert cfg.dt == pytest.approx(1.08e-8, rel=0.01)  # ~ contact time / 30
+    assert cfg.dt == pytest.approx(1.62e-8, rel=0.01)  # ~ contact time / 20
     assert cfg.steps_per_frame * cfg.dt == pytest.approx(5e-6)  # frames on whole steps
-    assert cfg.total_steps == pytest.approx(1.95e5, rel=0.01)
+    assert cfg.total_steps == pytest.approx(1.29e5, rel=0.01)
     assert cfg.first_frame_time == pytest.approx(1.1e-3)
     assert cfg.force_law().shape == (LAW_SIZE,)
     le = make_config("lebc", "default")

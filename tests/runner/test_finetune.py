@@ -133,7 +133,7 @@ def test_fine_tuning_uses_its_own_optimiser_defaults():
     apply_finetune_defaults(scratch)
     assert cfg.model.lr == cfg.finetune.lr < scratch.model.lr
     assert cfg.model.warmup_fraction == cfg.finetune.warmup_fraction
-    assert scratch.model.lr == 2.0e-3  # a run from scratch keeps the preset's
+    assert scratch.model.lr == 4.0e-3  # a run from scratch keeps the preset's
 
 
 def _variant(source_path, path, **changes):

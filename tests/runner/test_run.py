@@ -88,9 +88,9 @@ def test_custom_split_and_defaults():
     assert default.data.history_len == 10  # experiment=default is the default preset
     # a step budget: one simulation of the user's gets as many updates as the default six
     # (the model's own: the lean contact encoder takes twice the steps of the paper models)
-    assert (default.trainer.max_steps, default.trainer.max_epochs) == (3640, -1)
+    assert (default.trainer.max_steps, default.trainer.max_epochs) == (2400, -1)
     # grip, pct and vct share the default model's form and budget (only the mode differs)
-    assert compose_run(["model=vct"]).trainer.max_steps == 3640
+    assert compose_run(["model=vct"]).trainer.max_steps == 2400
     assert compose_run(["model=vct_paper"]).trainer.max_steps == 1820
     assert compose_run(["trainer.max_steps=50"]).trainer.max_steps == 50
     # the data's graph cut-off follows the encoder (one source of truth)

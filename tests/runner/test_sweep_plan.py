@@ -115,7 +115,7 @@ def test_decoder_modes_differ_only_in_the_mode():
     assert models["grip"]["encoder"]["name"] == "contact"
     assert models["grip"]["decoder"] == "direct" and models["grip"]["horizon"] == 10
     budgets = {compose_run([f"model={m}"]).trainer.max_steps for m in ("grip", "pct", "vct")}
-    assert budgets == {3640}
+    assert budgets == {2400}
     # the paper's encoder is one option like any other, on the same decoder and budget
     paper_encoder = plain(compose_run(["model=vct", "model/encoder=graph_conv"]).model)
     assert paper_encoder["encoder"]["name"] == "graph_conv"

@@ -13,7 +13,7 @@ commit 33196a0, in a virtualenv with its `sweep` extra: optuna 2.10 and hydra-op
     timeout --signal=TERM 2400 python -m gripdem.run hparams_search=optuna \\
         hydra.sweeper.n_trials=400 hydra.sweeper.study_name=compare hydra.sweep.dir=RUN/new
     # (more new studies, e.g. with hydra.sweeper.pruner.reduction_factor=4, the same way)
-    # each study's best, retrained at the full budget (3640 steps), seeds 0-2
+    # each study's best, retrained at the full budget (model.train_steps), seeds 0-2
     python experiments/benchmarks/studies/study_comparison.py --best RUN/old RUN/new
     python -m gripdem.run -m seed=0,1,2 <its printed overrides> hydra.sweep.dir=RUN/retrain_old
     python -m gripdem.run -m seed=0,1,2 <its printed overrides> hydra.sweep.dir=RUN/retrain_new
@@ -273,11 +273,11 @@ def main() -> None:
     )
     text = (
         f"Studies of the default model's space (conf/hparams_search/optuna.yaml: six keys, TPE "
-        f"seed 1234, half the default budget per trial), each stopped after "
+        f"seed 1234, 1820 steps per trial), each stopped after "
         f"{args.wall_minutes:.0f} minutes on the machine of the header, one after the other in "
         "one session. *Trials finished* counts the trials that ended in that time (complete or "
-        "pruned); each study's best setting was then retrained at the full budget (3640 steps) "
-        "with seeds 0-2.\n\n"
+        "pruned); each study's best setting was then retrained at the full budget "
+        "(model.train_steps) with seeds 0-2.\n\n"
         + markdown_table(headers, rows)
         + loads
         + "\n\nThe validation RMSE of a setting is on its own validation windows, which "

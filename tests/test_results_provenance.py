@@ -120,7 +120,8 @@ def _page(tmp_path: Path, text: str) -> list[str]:
         ("Run `trainer.max_steps=3640` or `--timeout 600 s`.", []),
         # a figure its cited result file holds, at the precision it is written with
         (
-            "The sweep took 5.5 min (`experiments/results/split_sweep/split_sweep.md`).",
+            "The sweep took 5.5 min "
+            "(`experiments/results/split_sweep/history/split_sweep_0.2.0.md`).",
             [],
         ),
         # included and generated blocks are not the page's prose

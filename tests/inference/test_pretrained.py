@@ -63,8 +63,8 @@ def test_both_scenes_ship_an_ensemble_with_its_settings_and_long_rollout_statist
     """Each ensemble: fine-tuned from its scene's shipped model on one-link windows (split
     190-10; an ensemble trains on the CRPS of one link, not on chained links), latent noise,
     contact capture and inflation recorded in the file, and a card with the statistics of a
-    2000-frame rollout of 8 members beside the deterministic model's, within the contact and
-    MSD targets (the closing note of the ensemble issue has every figure)."""
+    2000-frame rollout of 8 members beside the deterministic model's and the targets
+    (docs/explanation/surrogate.md#ensembles: which are met, which are missed)."""
     for name, scene in ENSEMBLES.items():
         hparams, _, card = read_model_file(FOLDER / f"{name}.safetensors", tensors=False)
         assert card["shipped_as"] == f"pretrained:{name}" and card["scene"] == scene

@@ -31,6 +31,7 @@ Cases:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import tempfile
@@ -112,6 +113,19 @@ def long_rollout(checkpoint: Path, data_path: Path, frames: int, label: str) -> 
 # --------------------------------------------------------------------------------------------
 # bf16
 # --------------------------------------------------------------------------------------------
+def first_link(batch, frames: int):
+    """``batch`` cut to its first ``frames`` target frames (one forward pass of the model)."""
+    end = batch.history_len + 1 + frames
+    return dataclasses.replace(
+        batch,
+        target_deltas=batch.target_deltas[:, :, :frames],
+        target_positions=batch.target_positions[:, :, :frames],
+        times=batch.times[:, :end],
+        offsets=batch.offsets[:, :end],
+        crossing_mask=None,
+    )
+
+
 @torch.no_grad()
 def bf16_case(run_dir: Path, n_windows: int | None, device: str = "cpu") -> dict:
     """Test windows of a trained run under autocast against float32."""
@@ -119,9 +133,11 @@ def bf16_case(run_dir: Path, n_windows: int | None, device: str = "cpu") -> dict
     model = load_checkpoint_model(run.checkpoint).to(device)
     model.eval()
     dm = test_windows(run, model)
-    # a model shorter than the split's horizon is chained over the test windows; one forward
-    # pass covers a validation window (the model's own horizon): compare precisions there
+    # a model shorter than the split's horizon is chained over the test windows; compare the
+    # precisions on one forward pass over the validation windows' first link (with rollout
+    # training a validation window spans several links: the frames beyond the first are cut)
     part = "test" if dm.model_horizon == dm.split.horizon else "val"
+    link = dm.model_horizon
     dataset = dm.datasets[part]
     n = len(dataset) if n_windows is None else min(n_windows, len(dataset))
     dtypes = {"float32": None, "bfloat16": torch.bfloat16}
@@ -130,7 +146,7 @@ def bf16_case(run_dir: Path, n_windows: int | None, device: str = "cpu") -> dict
     preds = {name: [] for name in dtypes}
     trues, offs, cvs = [], [], []
     for i in range(n):
-        batch = collate_windows([dataset[i]]).to(device)
+        batch = first_link(collate_windows([dataset[i]]).to(device), link)
         for name, dtype in dtypes.items():
             with torch.autocast(device, dtype=dtype or torch.bfloat16, enabled=dtype is not None):
                 out = model(batch)

@@ -152,11 +152,15 @@ def write_result(path: str | Path, text: str, fields: dict[str, Any] | None = No
     atomic_write(Path(path), f"{result_header(fields)}\n\n{text.rstrip()}\n")
 
 
-def write_report(stem: str | Path, text: str, data: Any, echo: bool = True) -> None:
+def write_report(stem: str | Path | None, text: str, data: Any, echo: bool = True) -> None:
     """``STEM.md`` (the header line, then the report) and ``STEM.json`` (the header's fields
     under ``header`` beside the keys of ``data``, a mapping; other data under ``results``; paths
     written as :func:`relative` writes them), each written whole; then print the report
-    (``echo``)."""
+    (``echo``). Without a ``stem`` (a script run with no ``--out``) the report is only printed."""
+    if stem is None:
+        if echo:
+            print(text)
+        return
     stem = Path(stem)
     fields = result_fields()
     write_result(stem.parent / f"{stem.name}.md", text, fields)

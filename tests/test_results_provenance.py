@@ -95,6 +95,13 @@ def test_the_header_writer_writes_a_relative_command_and_parses_back(tmp_path, m
     assert not list(tmp_path.glob(".*.tmp"))  # written whole: no temporary left
 
 
+def test_a_report_without_a_stem_is_printed_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    """A script run without ``--out`` hands ``write_report`` no stem: it prints, writes nothing."""
+    monkeypatch.chdir(tmp_path)
+    write_report(None, "| a |", {"rows": [1]})
+    assert capsys.readouterr().out == "| a |\n" and not list(tmp_path.iterdir())
+
+
 def _page(tmp_path: Path, text: str) -> list[str]:
     page = tmp_path / "page.md"
     page.write_text(text)

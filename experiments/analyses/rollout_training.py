@@ -241,10 +241,7 @@ def main() -> None:
         + ": each run's own, two runs side by side on the machine of the header (shared with "
         "other work at times: read them as rough).\n\n" + table
     )
-    if args.out:
-        write_report(args.out, text, rows)
-    else:
-        print(text)
+    write_report(args.out, text, rows)
 
 
 if __name__ == "__main__":

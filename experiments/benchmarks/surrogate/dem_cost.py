@@ -151,10 +151,7 @@ def main(argv: list[str] | None = None) -> dict:
         ]
     )
     out = {"lammps": missing, "frames": args.frames, "rounds": args.rounds, "cells": data}
-    if args.out:
-        write_report(args.out, text, out)
-    else:
-        print(text)
+    write_report(args.out, text, out)
     return out
 
 

@@ -134,10 +134,7 @@ def main(argv: list[str] | None = None) -> dict:
         ]
     )
     out = {"scene": args.scene, "frames": args.frames, "rounds": args.rounds, "variants": data}
-    if args.out:
-        write_report(args.out, text, out)
-    else:
-        print(text)
+    write_report(args.out, text, out)
     return out
 
 

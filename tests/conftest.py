@@ -3,7 +3,9 @@ trajectories with many face crossings.
 
 ``tiny_pbc_path`` / ``tiny_lebc_path`` are generated once per test session (a few seconds
 each) through :func:`gripdem.dem.output.ensure_scene_dataset` into a session temporary
-directory, from the same configs as ``python -m gripdem.simulate scene=... preset=tiny``.
+directory, from the same configs as ``python -m gripdem.simulate scene=... preset=tiny``
+(tests/support/tiny_scenes.py; a whole-suite run under pytest-xdist makes them while its
+workers start).
 
 ``trajectories(...)`` makes small real trajectories: particles move in lattice-continuous
 coordinates (affine shear u_z = k*x in the LE scene, a cosine profile in the periodic one, plus
@@ -22,15 +24,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
-from omegaconf import DictConfig
+from tiny_scenes import compose_simulate, tiny_dataset
 
 from gripdem.boundary import Boundary, Box, LeesEdwards, wrap_positions
 from gripdem.data.dataset_io import write_dataset
 from gripdem.data.schema import TrajectoryData
-from gripdem.dem.output import ensure_scene_dataset
-
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
 
 def pytest_sessionstart(session):
@@ -47,6 +45,46 @@ def pytest_sessionstart(session):
     root = Path(__file__).resolve().parents[1]
     for folder in ("gripdem", "experiments"):
         compileall.compile_dir(root / folder, quiet=2, workers=1)
+    _start_making_the_tiny_scenes(session.config)
+
+
+#: the process making the tiny scenes ahead of the workers (tests/support/tiny_scenes.py)
+_SCENE_MAKER: list[subprocess.Popen] = []
+
+
+def _start_making_the_tiny_scenes(config) -> None:
+    """A whole-suite run under pytest-xdist (no test paths given) makes the tiny scenes in a
+    process of its own while the workers start: in the folder that the workers'
+    ``gripdem_data_root`` names, through the dataset cache, whose lock makes a worker that
+    needs a scene before it is ready wait for it. Measured on 2 cores: without it, one worker
+    made the periodic scene (and, in a fresh clone, compiled the DEM's kernels) while the
+    other waited for it, idle. A run of some tests, or without workers, makes what it needs
+    when it needs it."""
+    if os.environ.get("GRIPDEM_TEST_DATA") or not config.pluginmanager.hasplugin("dsession"):
+        return
+    if config.args_source != pytest.Config.ArgsSource.TESTPATHS:
+        return
+    shared = config._tmp_path_factory.getbasetemp() / "gripdem-data"  # the workers' parent
+    shared.mkdir(exist_ok=True)
+    script = Path(__file__).resolve().parent / "support" / "tiny_scenes.py"
+    with open(shared / "tiny_scenes.log", "w") as log:
+        _SCENE_MAKER.append(
+            subprocess.Popen(
+                [sys.executable, str(script), str(shared)],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env={**os.environ, "OMP_NUM_THREADS": "1"},
+            )
+        )
+
+
+def pytest_sessionfinish(session):
+    """The scene maker ends with the run (an early stop: ``-x``, Ctrl-C); the dataset cache
+    writes atomically, so a stopped generation leaves nothing that a later run would read."""
+    for maker in _SCENE_MAKER:
+        if maker.poll() is None:
+            maker.terminate()
+        maker.wait()
 
 
 # One intra-op thread by default: the tests' tensors are small, and on a loaded 2-core machine
@@ -101,12 +139,6 @@ def make_trajectories(
 def trajectories():
     """The generator :func:`make_trajectories` (tests import nothing from conftest)."""
     return make_trajectories
-
-
-def compose_simulate(overrides: list[str]) -> DictConfig:
-    """The config ``python -m gripdem.simulate <overrides>`` would run with."""
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return compose(config_name="simulate", overrides=overrides)
 
 
 @pytest.fixture
@@ -182,13 +214,6 @@ def pytest_xdist_make_scheduler(config, log):
     return OneWorkerModules(config, log)
 
 
-def _tiny_dataset(scene: str, root: Path) -> Path:
-    cfg = compose_simulate([f"scene={scene}", "preset=tiny"])
-    return ensure_scene_dataset(
-        cfg.scene, cfg.preset, sims=cfg.sims, seed=cfg.seed, root=root, progress=False
-    )
-
-
 @pytest.fixture(scope="session")
 def run_experiment_quick(gripdem_data_root):
     """``run_experiment_quick(name, *args)``: ``python experiments/<name>.py --quick ARGS`` from
@@ -212,13 +237,13 @@ def run_experiment_quick(gripdem_data_root):
 @pytest.fixture(scope="session")
 def tiny_pbc_path(gripdem_data_root) -> Path:
     """Tiny periodic dataset (3 simulations x 61 frames x 400 particles), validated."""
-    return _tiny_dataset("pbc", gripdem_data_root)
+    return tiny_dataset("pbc", gripdem_data_root)
 
 
 @pytest.fixture(scope="session")
 def tiny_lebc_path(gripdem_data_root) -> Path:
     """Tiny Lees-Edwards dataset (3 simulations x 61 frames x 400 particles), validated."""
-    return _tiny_dataset("lebc", gripdem_data_root)
+    return tiny_dataset("lebc", gripdem_data_root)
 
 
 @pytest.fixture(scope="session")

@@ -64,8 +64,17 @@ def test_the_installed_wheel_runs_from_another_folder(
         assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
         return done.stdout
 
-    where = run("-c", "import gripdem.run as r; print(r.__file__, r.CONFIG_DIR)")
+    # where gripdem is imported from, and the API finds its scenes among the installed configs
+    # (an unknown one is refused, naming them); not a simulation: the DEM kernels would compile
+    # again for the installed copy's path (numba's cache is keyed by it), 7 s of the suite for
+    # code that is the same
+    code = (
+        "import gripdem, gripdem.run as r\nprint(r.__file__, r.CONFIG_DIR)\n"
+        "try:\n gripdem.generate('walls')\nexcept ValueError as e:\n print(e)"
+    )
+    where, refused = run("-c", code).splitlines()
     assert where.split()[0].startswith(str(target)) and str(ROOT) not in where
+    assert "expected one of ['lebc', 'pbc']" in refused
     # the main command, in a multirun: each job is `python -m gripdem.run` of the wheel
     out = run("-m", "gripdem.run", "-m", "model=vct", "experiment=smoke", "hydra.sweep.dir=sw",
               "outputs.figures=false")  # fmt: skip
@@ -74,8 +83,3 @@ def test_the_installed_wheel_runs_from_another_folder(
     run("-m", "gripdem.predict", "pretrained:lebc", str(tiny_lebc_path), "--out", "p.h5",
         "--sims", "0", "--frames", "5", "--no-overlap")  # fmt: skip
     assert (elsewhere / "p.h5").exists()
-    # the API finds its scenes among the installed configs (an unknown one is refused, naming
-    # them); not a simulation: the DEM kernels would compile again for the installed copy's
-    # path (numba's cache is keyed by it), 7 s of the suite for code that is the same
-    code = "import gripdem\ntry:\n gripdem.generate('walls')\nexcept ValueError as e:\n print(e)"
-    assert "expected one of ['lebc', 'pbc']" in run("-c", code)

@@ -1,26 +1,48 @@
 """numpy / torch dispatch shared by the boundary modules (private): every function takes numpy
-arrays or torch tensors and returns the same kind."""
+arrays or torch tensors and returns the same kind.
+
+torch is imported by the torch branches only: a caller with a tensor has imported it already,
+and a numpy caller (the DEM, the importers, a sweep's controlling process, which computes
+its jobs' dataset names) does not pay its import (about 1.2 s)."""
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
-import torch
 
 Array = Any  # np.ndarray | torch.Tensor
 
 
 def _is_torch(x: Array) -> bool:
-    return isinstance(x, torch.Tensor)
+    torch = sys.modules.get("torch")  # no tensor exists before torch is imported
+    return torch is not None and isinstance(x, torch.Tensor)
 
 
 def _floor(x: Array) -> Array:
-    return torch.floor(x) if _is_torch(x) else np.floor(x)
+    if _is_torch(x):
+        import torch
+
+        return torch.floor(x)
+    return np.floor(x)
 
 
 def _stack(parts: list, like: Array) -> Array:
-    return torch.stack(parts, dim=-1) if _is_torch(like) else np.stack(parts, axis=-1)
+    if _is_torch(like):
+        import torch
+
+        return torch.stack(parts, dim=-1)
+    return np.stack(parts, axis=-1)
+
+
+def _cumsum_last(x: Array) -> Array:
+    """Cumulative sum along the last axis (same kind as x)."""
+    if _is_torch(x):
+        import torch
+
+        return torch.cumsum(x, -1)
+    return np.cumsum(x, -1)
 
 
 def _as_offset(offset: Array | float | None, like: Array) -> Array:
@@ -28,6 +50,8 @@ def _as_offset(offset: Array | float | None, like: Array) -> Array:
     if offset is None:
         offset = 0.0
     if _is_torch(like):
+        import torch
+
         return torch.as_tensor(offset, dtype=like.dtype, device=like.device)
     return np.asarray(offset, dtype=like.dtype)
 

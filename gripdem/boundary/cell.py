@@ -10,7 +10,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import torch
 
 from gripdem.boundary._array import Array, _is_torch, wrap_coordinate
 
@@ -156,12 +155,16 @@ def check_volume_fraction(n_particles: int, diameter: float, box: Box, where: st
 
 def check_finite(values: Array, what: str) -> None:
     """Raise a clear error naming ``what`` if ``values`` holds NaN or Inf."""
-    bad = ~torch.isfinite(values) if _is_torch(values) else ~np.isfinite(values)
+    if _is_torch(values):
+        import torch
+
+        bad = ~torch.isfinite(values)
+        where = torch.nonzero
+    else:
+        bad, where = ~np.isfinite(values), np.argwhere
     if bad.any():
         count = int(bad.sum())
-        first = tuple(
-            int(i) for i in (torch.nonzero(bad)[0] if _is_torch(values) else np.argwhere(bad)[0])
-        )
+        first = tuple(int(i) for i in where(bad)[0])
         raise FloatingPointError(
             f"{what}: {count} non-finite value(s) (NaN or Inf), first at index {first}"
         )

@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch
 
 from gripdem.boundary._array import Array, _is_torch, _stack, wrap_coordinate
 from gripdem.boundary.cell import Box
@@ -17,6 +16,8 @@ def sincos_encode(positions: Array, box: Box) -> Array:
     ``[sin θx, cos θx, sin θy, cos θy, sin θz, cos θz]`` with ``θ = 2π·p/l`` per axis."""
     lengths = box.lengths
     if _is_torch(positions):
+        import torch
+
         lengths_t = torch.as_tensor(lengths, dtype=positions.dtype, device=positions.device)
         angle = 2 * math.pi * positions / lengths_t
         out = torch.stack([torch.sin(angle), torch.cos(angle)], dim=-1)
@@ -35,6 +36,8 @@ def sincos_decode(features: Array, box: Box) -> Array:
     pairs = features.reshape(*features.shape[:-1], 3, 2)
     lengths = box.lengths
     if _is_torch(features):
+        import torch
+
         angle = torch.atan2(pairs[..., 0], pairs[..., 1])
         lengths_t = torch.as_tensor(lengths, dtype=features.dtype, device=features.device)
         pos = angle * lengths_t / (2 * math.pi)

@@ -9,9 +9,15 @@ of every crossing."""
 from __future__ import annotations
 
 import numpy as np
-import torch
 
-from gripdem.boundary._array import Array, _as_offset, _is_torch, _stack, wrap_coordinate
+from gripdem.boundary._array import (
+    Array,
+    _as_offset,
+    _cumsum_last,
+    _is_torch,
+    _stack,
+    wrap_coordinate,
+)
 from gripdem.boundary.cell import Boundary, Box
 from gripdem.boundary.images import (
     apply_lattice_shift,
@@ -64,7 +70,7 @@ def lattice_continuous_steps(
         increments = le_offset_increments(_as_offset(offsets, raw[..., 0]), box)
     inc = _as_offset(increments, raw[..., 0])
     crossings = -shift[..., 0]  # +1 for a step out through +x (into image cell +1)
-    cells = torch.cumsum(crossings, -1) if _is_torch(crossings) else np.cumsum(crossings, -1)
+    cells = _cumsum_last(crossings)
     frame = anchor % (raw.shape[-2] + 1)
     at_anchor = cells[..., frame - 1 : frame] if frame else cells[..., :1] * 0
     drift = (cells - crossings - at_anchor) * inc  # cell at the start of each step, from anchor
@@ -84,6 +90,8 @@ def step_start_x(steps: Array, x_end: Array) -> Array:
     steps ``(..., S, 3)``, x_end ``(...)`` -> ``(..., S)``."""
     dx = steps[..., 0]
     if _is_torch(dx):
+        import torch
+
         after = torch.flip(torch.cumsum(torch.flip(dx, [-1]), -1), [-1])
     else:
         after = np.flip(np.cumsum(np.flip(dx, -1), -1), -1)
@@ -123,12 +131,15 @@ def unwrap_trajectory(
     The result satisfies ``wrap_positions(unwrapped[t], box, offsets[t]) == positions[t]`` (to
     rounding). Assumes every true frame-to-frame displacement is shorter than half the box.
     """
-    xp_torch = _is_torch(positions)
-    moved = torch.movedim(positions, 0, -2) if xp_torch else np.moveaxis(positions, 0, -2)
-    steps = lattice_continuous_steps(moved, box, offsets, 0, offset_increments)
-    if xp_torch:
+    if _is_torch(positions):
+        import torch
+
+        moved = torch.movedim(positions, 0, -2)
+        steps = lattice_continuous_steps(moved, box, offsets, 0, offset_increments)
         steps = torch.movedim(steps, -2, 0)
         return torch.cat([positions[:1], positions[:1] + torch.cumsum(steps, 0)], 0)
+    moved = np.moveaxis(positions, 0, -2)
+    steps = lattice_continuous_steps(moved, box, offsets, 0, offset_increments)
     steps = np.moveaxis(steps, -2, 0)
     return np.concatenate([positions[:1], positions[:1] + np.cumsum(steps, 0)], 0)
 

@@ -11,7 +11,6 @@ O(n²) reference for tests.
 from __future__ import annotations
 
 import numpy as np
-import vesin
 
 from gripdem.boundary.cell import Box
 from gripdem.boundary.images import minimum_image
@@ -52,7 +51,7 @@ def neighbour_pairs(
         raise ValueError(f"neighbour cut-off must be positive, got {cutoff!r}")
     offset = float(offset)
     radius = max(float(cutoff), MIN_SEARCH_FRACTION * float(box.lengths.min()))
-    nl = vesin.NeighborList(cutoff=radius, full_list=False, n_threads=n_threads)
+    nl = _vesin_list(radius, n_threads)
     i, j, vec = nl.compute(positions, le_cell(box, offset), True, "ijD")
     i, j = i.astype(np.int64), j.astype(np.int64)
     if 2 * cutoff >= min(box.lx, box.ly, box.lz):
@@ -75,6 +74,15 @@ def neighbour_pairs(
     return i, j, vec
 
 
+def _vesin_list(radius: float, n_threads: int):
+    """vesin's half neighbour list of ``radius``. vesin is imported here, not with the module:
+    it imports torch where torch is installed (about 1.2 s), which a caller that only names
+    files or configs (a sweep's controlling process, the DEM's workers) does not need."""
+    import vesin
+
+    return vesin.NeighborList(cutoff=radius, full_list=False, n_threads=n_threads)
+
+
 def neighbour_pairs_with_shifts(
     positions: np.ndarray, box: Box, offset: float, cutoff: float, n_threads: int = 1
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,7 +98,7 @@ def neighbour_pairs_with_shifts(
             f"({0.5 * box.lengths.min():g}), got {cutoff!r}"
         )
     radius = max(float(cutoff), MIN_SEARCH_FRACTION * float(box.lengths.min()))
-    nl = vesin.NeighborList(cutoff=radius, full_list=False, n_threads=n_threads)
+    nl = _vesin_list(radius, n_threads)
     i, j, shift, vec = nl.compute(positions, le_cell(box, float(offset)), True, "ijSD")
     keep = np.einsum("pc,pc->p", vec, vec) < cutoff * cutoff
     return i[keep].astype(np.int64), j[keep].astype(np.int64), shift[keep].astype(np.float64)

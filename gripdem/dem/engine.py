@@ -14,15 +14,18 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from gripdem.boundary import wrap_positions
-from gripdem.dem import forces_numba, forces_torch
+from gripdem.dem import forces_numba
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.neighbours import PairList, build_pairs, transfer_history
 from gripdem.dem.params import SOLID_SPHERE_INERTIA
+
+if TYPE_CHECKING:
+    import torch
 
 
 class Simulation:
@@ -236,6 +239,8 @@ def _one_cpu_thread(device: torch.device) -> Iterator[None]:
     if device.type != "cpu":
         yield
         return
+    import torch
+
     previous = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -245,7 +250,15 @@ def _one_cpu_thread(device: torch.device) -> Iterator[None]:
 
 
 class _TorchBackend(_Backend):
+    """torch and its force law are imported by this backend only: the default (numba) runs,
+    its worker processes among them, do not pay torch's import (about 1.2 s)."""
+
     def __init__(self, sim: Simulation, pos, vel, omega, device):
+        import torch
+
+        from gripdem.dem import forces_torch
+
+        self.forces = forces_torch
         self.sim = sim
         self.device = torch.device(device)
         t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float64, device=self.device)  # noqa: E731
@@ -260,13 +273,14 @@ class _TorchBackend(_Backend):
             "inertia": t(sim.inertia),
         }
         self._t = t
+        self._index = lambda a: torch.as_tensor(a, device=self.device)  # int64 pair indices
 
     def load(self, pos, vel, pairs, history):
         s, t = self.state, self._t
         s["pos"], s["vel"] = t(pos), t(vel)
         s["ref_pos"] = s["pos"].clone()
-        s["pair_i"] = torch.as_tensor(pairs.i, device=self.device)
-        s["pair_j"] = torch.as_tensor(pairs.j, device=self.device)
+        s["pair_i"] = self._index(pairs.i)
+        s["pair_j"] = self._index(pairs.j)
         s["shift"] = t(pairs.shift)
         s["history"] = t(history)
         self.pairs = pairs
@@ -282,7 +296,7 @@ class _TorchBackend(_Backend):
     def initial_forces(self):
         s, sim = self.state, self.sim
         with _one_cpu_thread(self.device):
-            s["force"], s["torque"], s["history"], overlap = forces_torch.compute_forces(
+            s["force"], s["torque"], s["history"], overlap = self.forces.compute_forces(
                 s["pos"],
                 s["vel"],
                 s["omega"],
@@ -301,7 +315,7 @@ class _TorchBackend(_Backend):
     def advance(self, n_steps):
         sim = self.sim
         with _one_cpu_thread(self.device):
-            done, due, overlap = forces_torch.advance(
+            done, due, overlap = self.forces.advance(
                 self.state,
                 sim.law,
                 sim.dt,

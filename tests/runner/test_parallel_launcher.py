@@ -95,6 +95,7 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     assert f"the full tables: {sweep / 'summary.md'} and {sweep / 'summary.csv'}" in proc.stdout
     imported = [line.rsplit("|", 1)[-1].strip() for line in proc.stderr.splitlines()]
     assert "hydra" in imported and not [m for m in imported if m.startswith("lightning")]
+    assert "torch" not in imported  # the jobs' dataset names are computed without it
     lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert len(lines) == 1 and "job baselines.ar_lags=50 (" in lines[0]
     assert "ar_lags=3 " not in lines[0]  # only the failed job is named

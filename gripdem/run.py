@@ -28,7 +28,9 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from gripdem.config_files import config_dir
-from gripdem.runner.config_schema import given_data_path, register
+from gripdem.data.windows import Split
+from gripdem.runner.config_checks import check_windows_fit_the_file
+from gripdem.runner.config_schema import given_data_path, plain, register
 from gripdem.runner.console import one_line, run_hydra_command, single_run_errors
 from gripdem.runner.renamed_options import refuse_removed_names
 
@@ -44,7 +46,12 @@ def main(cfg: DictConfig) -> float:
     _OUT_DIRS.append(out_dir)
     report = None
     with single_run_errors(out_dir), study_trial(cfg) as trial:
-        given_data_path(cfg)  # a wrong data.path fails before Lightning's import (seconds)
+        # a wrong data.path, or a split its simulations cannot hold, fails before Lightning's
+        # import (seconds)
+        path = given_data_path(cfg)
+        if path is not None:
+            split = Split(int(cfg.split.history), int(cfg.split.horizon))
+            check_windows_fit_the_file(path, plain(cfg.data), split)
         from gripdem.runner.experiment import run_experiment
 
         report = run_experiment(cfg, out_dir, trial)

@@ -37,7 +37,7 @@ from gripdem.data.protocols import (
     PARTS,
     RENAMED_PLAN_OPTIONS,
     WindowPlan,
-    current_protocol,
+    plan_arguments,
     plan_windows,
 )
 from gripdem.data.resumable import ResumableLoader
@@ -111,15 +111,15 @@ class TrajectoryDataModule(L.LightningDataModule):
             )
         self.path = Path(path)
         self.split = Split.parse(split)
-        self.plan_args = dict(
-            protocol=current_protocol(protocol),
+        self.plan_args = plan_arguments(
+            protocol=protocol,
+            fractions=fractions,
+            sims=sims,
+            simulations=simulations,
+            in_sample_windows=in_sample_windows,
             history_len=history_len,
-            train_stride=int(train_stride),
+            train_stride=train_stride,
             eval_stride=eval_stride,
-            fractions=None if fractions is None else dict(fractions),
-            sims=None if sims is None else dict(sims),
-            simulations=None if simulations is None else list(simulations),
-            in_sample_windows=int(in_sample_windows),
         )
         self.encoding_name = encoding
         self.normalise = bool(normalise)

@@ -144,6 +144,45 @@ def current_protocol(protocol: str, warn: bool = True) -> str:
     return new
 
 
+def plan_arguments(
+    protocol: str = "auto",
+    fractions: Mapping[str, float] | None = None,
+    sims: Mapping[str, Sequence[int] | None] | None = None,
+    simulations: Sequence[int] | None = None,
+    in_sample_windows: int = 1,
+    history_len: int | None = None,
+    train_stride: int = 1,
+    eval_stride: int | None = None,
+) -> dict[str, Any]:
+    """The keyword arguments of :func:`plan_windows` from the data options of the same names
+    (``conf/data/default.yaml``): one place for the DataModule and for the runner's check of a
+    user's file before Lightning is imported
+    (:func:`gripdem.runner.config_checks.check_windows_fit_the_file`)."""
+    return dict(
+        protocol=current_protocol(protocol),
+        history_len=history_len,
+        train_stride=int(train_stride),
+        eval_stride=eval_stride,
+        fractions=None if fractions is None else dict(fractions),
+        sims=None if sims is None else dict(sims),
+        simulations=None if simulations is None else list(simulations),
+        in_sample_windows=int(in_sample_windows),
+    )
+
+
+#: the data options that :func:`plan_arguments` reads
+PLAN_OPTIONS = (
+    "protocol",
+    "fractions",
+    "sims",
+    "simulations",
+    "in_sample_windows",
+    "history_len",
+    "train_stride",
+    "eval_stride",
+)
+
+
 def plan_windows(
     n_sims: int,
     n_frames: int,

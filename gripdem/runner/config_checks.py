@@ -1,12 +1,15 @@
 """Checks of a composed config that need more than its schema: the split against the built-in
 preset's simulations, rollout training against the split (the scene x model x data specifics
 all run from :func:`gripdem.runner.config_schema.check_combination`, the one place that calls
-them). Light: no torch, no Lightning."""
+them), and the split's windows against a user's file. Light: no torch, no Lightning."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from omegaconf import DictConfig
 
+from gripdem.data.protocols import PLAN_OPTIONS, RENAMED_PLAN_OPTIONS, plan_arguments, plan_windows
 from gripdem.data.windows import Split, resolve_rollout_links
 from gripdem.runner.run_names import hydra_choices
 
@@ -53,3 +56,26 @@ def check_split_fits_the_preset(cfg: DictConfig) -> None:
         f"writes {frames} per simulation: give preset=default, or a split of at most "
         f"{frames} frames (e.g. split=10-5)"
     )
+
+
+def check_windows_fit_the_file(path: Path, data: dict, split: Split) -> None:
+    """The split's windows fit a user's file (``data.path``): the DataModule's own window plan
+    (:func:`gripdem.data.protocols.plan_windows`, from the same ``data`` options as plain
+    values, so the same one-line error), made from the shape of the file's positions before
+    ``python -m gripdem.run`` imports Lightning (seconds). A file that cannot be read this way
+    is left to the load, which names what is wrong with it."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            shape = h5["positions"].shape
+    except (OSError, KeyError, TypeError):
+        return
+    if len(shape) != 4:
+        return
+    data = dict(data)
+    for old, new in RENAMED_PLAN_OPTIONS.items():  # a run's config saved before the rename
+        if data.get(old) is not None:
+            data[new] = data[old]
+    options = {key: data[key] for key in PLAN_OPTIONS if data.get(key) is not None}
+    plan_windows(int(shape[0]), int(shape[1]), split, **plan_arguments(**options))

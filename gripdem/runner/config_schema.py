@@ -363,6 +363,12 @@ def check_combination(cfg: DictConfig, notes: bool = True) -> None:
     history = cfg.data.history_len if cfg.data.history_len is not None else cfg.split.history
     if cfg.model.encoder.n_blocks > 0 and history < 1:
         raise ValueError(f"data.history_len must be >= 1, got {history}")
+    lags = cfg.baselines.ar_lags
+    if lags is not None and not 1 <= lags <= history:
+        raise ValueError(
+            f"baselines.ar_lags={lags} must lie in 1..{history}, the history the windows hold "
+            f"(data.history_len {history}; null: min(history_len, 10))"
+        )
 
 
 def _check_logger_options(options) -> None:

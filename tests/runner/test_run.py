@@ -147,6 +147,20 @@ def test_the_ar_prior_refuses_the_paper_frame():
     assert not compose_run(["model=grip_paper"]).model.ar_prior
 
 
+def test_the_linear_ar_lags_fit_the_history_the_windows_hold():
+    """``baselines.ar_lags`` beyond the history is refused by the config check, so a sweep
+    names such a job before any job runs (it once failed each job after its data and
+    Lightning were loaded, 11 s in)."""
+    from gripdem.runner.config_schema import check_combination
+
+    check_combination(compose_run(["experiment=smoke", "baselines.ar_lags=5"], hydra_node=False))
+    for extra, lags, history in (([], 6, 5), ([], 0, 5), (["data.history_len=3"], 4, 3)):
+        cfg = compose_run(["experiment=smoke", *extra, f"baselines.ar_lags={lags}"], False)
+        refused = rf"^baselines.ar_lags={lags} must lie in 1\.\.{history}, the history"
+        with pytest.raises(ValueError, match=refused):
+            check_combination(cfg, notes=False)
+
+
 def test_the_ensemble_model_is_the_default_model_with_noise_and_its_own_score():
     """model=ensemble: the default model's form, latent noise, the fair CRPS over 2 members,
     and its best checkpoint on the validation CRPS (every other model: the RMSE)."""

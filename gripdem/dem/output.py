@@ -1,7 +1,11 @@
 """Generate, validate and write one scene dataset (``gripdem.simulate``), and find or generate
 the built-in scene datasets in the dataset cache (:mod:`gripdem.data.cache`): the file
 ``<scene>-<preset>-<key>.h5``, ``key`` hashing the full generator configuration (scene physics,
-preset sizes, sims, seed, backend) and the generator version."""
+preset sizes, sims, seed, backend) and the generator version.
+
+The DEM and its validation (:mod:`gripdem.dem.scenes`, :mod:`gripdem.dem.validation`, numba
+kernels both) are imported where a dataset is generated: a run whose dataset is cached, and a
+sweep's controlling process, which names its jobs' datasets, do not import them."""
 
 from __future__ import annotations
 
@@ -19,8 +23,6 @@ from gripdem.data.cache import cached_file, content_key, data_root
 from gripdem.data.dataset_io import read_str_attr, write_dataset
 from gripdem.dem.config import GeneratorConfig
 from gripdem.dem.params import GENERATOR_VERSION
-from gripdem.dem.scenes import generate
-from gripdem.dem.validation import validate_trajectories, write_report
 from gripdem.errors import GenerationError
 
 log = logging.getLogger(__name__)
@@ -56,6 +58,10 @@ def generate_dataset(
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path}: exists; refusing to overwrite it (pass overwrite=true)")
+    # the DEM and its validation (numba kernels both): imported by a generation only
+    from gripdem.dem.scenes import generate
+    from gripdem.dem.validation import validate_trajectories, write_report
+
     start = time.perf_counter()
     data, results = generate(config, progress=progress, workers=workers, device=device)
     generation_time = time.perf_counter() - start

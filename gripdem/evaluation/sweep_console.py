@@ -12,6 +12,7 @@ mean ± std of each.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from gripdem.evaluation.sweep_summary import SEED_KEY, Job, SeedStats, varying_params
 
@@ -33,6 +34,20 @@ STUDY_COLUMNS = (
 )
 #: the widest a swept value's cell may be before it is cut (with "…")
 MAX_VALUE = 24
+
+
+def shown_value(value: Any) -> str:
+    """A swept value as run names and the console show it: a number to 4 significant figures
+    (an integer as written), a path by its file name (two alike: the run name adds the job
+    number), anything else as written."""
+    value = str(value)
+    try:
+        number = float(value)
+    except ValueError:
+        return value.rstrip("/").rsplit("/", 1)[-1] or value.replace("/", ".")
+    if value.strip().lstrip("+-").isdigit():
+        return value.strip()
+    return f"{number:.4g}"
 
 
 def _number(value: float | None, digits: int = 3) -> str:
@@ -82,7 +97,7 @@ def console_summary(jobs: Sequence[Job], width: int = WIDTH) -> str:
     titles = [title for title, _, _ in columns]
 
     def swept(job: Job, names: Sequence[str]) -> str:
-        values = [_cut(f"{k}={job.params.get(k)}", MAX_VALUE) for k in names]
+        values = [_cut(f"{k}={shown_value(job.params.get(k))}", MAX_VALUE) for k in names]
         return " ".join(values) or job.name
 
     rows = []

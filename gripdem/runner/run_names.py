@@ -25,6 +25,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from gripdem.evaluation.sweep_console import shown_value
+
 #: the resolver's name in configs: ``${gripdem.run_name:}``
 RESOLVER = "gripdem.run_name"
 #: longest name kept whole (longer ones are cut and get the job number)
@@ -53,16 +55,6 @@ def swept_keys(task_overrides: list[str], sweeper_params: dict[str, Any] | None)
     return keys
 
 
-def _format(value: str) -> str:
-    try:
-        number = float(value)
-    except ValueError:  # a path: its file name (two alike get the job number)
-        return value.rstrip("/").rsplit("/", 1)[-1] or value.replace("/", ".")
-    if value.strip().lstrip("+-").isdigit():
-        return value.strip()
-    return f"{number:.4g}"
-
-
 def override_keys(overrides: list[str]) -> list[str]:
     """The keys that overrides set, as written (``model.lr``, ``model/encoder``; ``+``
     dropped), deletions (``~key``) left out."""
@@ -76,7 +68,7 @@ def name_of(job_overrides: list[str], keys: list[str]) -> str:
     for override in _parse(job_overrides):
         values[override.get_key_element()] = override.get_value_element_as_str()
     parts = [
-        f"{key.lstrip('+~').replace('/', '.')}={_format(values[key])}"
+        f"{key.lstrip('+~').replace('/', '.')}={shown_value(values[key])}"
         for key in keys
         if key in values
     ]

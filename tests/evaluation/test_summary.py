@@ -212,3 +212,23 @@ def test_the_console_summary_keeps_to_100_columns_with_long_swept_values(tmp_pat
     assert grouped[0].split()[:2] == ["group", "seeds"] and len(grouped) == 3  # two groups
     assert grouped[1] != grouped[2]  # the paths differ past the cut: still two groups
     assert " 2 " in grouped[1] and "±" in grouped[1]
+
+
+def test_the_console_shows_swept_values_as_the_run_names_do(tmp_path):
+    """A path by its file name, a number to 4 significant figures: the console's rows read as
+    the job folders and TensorBoard's runs are named."""
+    from gripdem.evaluation.sweep_console import console_summary
+    from gripdem.runner.run_names import name_of
+
+    root = tmp_path / "sweep"
+    sweeps = [
+        ["data.path=/x/y/mine.h5", "model.lr=0.00123456"],
+        ["data.path=/x/y/theirs.h5", "model.lr=3e-3"],
+    ]
+    for n, overrides in enumerate(sweeps):
+        make_job(root, n, overrides, metrics_of(1e-8, 2e-8, 1.0))
+    rows = console_summary(collect(root)).splitlines()[1:3]
+    for row, overrides in zip(rows, sweeps, strict=True):
+        name = name_of(overrides, ["data.path", "model.lr"])
+        assert row.split()[:2] == name.split(","), (row, name)
+    assert rows[0].startswith("data.path=mine.h5 model.lr=0.001235 ")

@@ -52,15 +52,19 @@ def test_plan_never_oversubscribes(monkeypatch):
 def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     tmp_path, gripdem_data_root, tiny_pbc_path
 ):
-    """Two jobs at once: one completes (metrics, its own log and TensorBoard run), one fails
-    on its data (the file's 61 frames cannot hold a window of the 10-60 split: the job's own
-    check, before it imports Lightning); the summary names the failed job with its error and
-    the command ends with status 1 after writing it."""
+    """Two jobs at once: one completes on the built-in scene (metrics, its own log and
+    TensorBoard run), one fails on its data (a user's file of 12 frames cannot hold a window of
+    the 10-5 split: the job's own check, before it imports Lightning); the summary names the
+    failed job with its error and the command ends with status 1 after writing it."""
+    import gripdem
+
+    tiny = gripdem.read_trajectory(tiny_pbc_path)
+    short = gripdem.Trajectory(tiny.positions[:, :12], tiny.times[:, :12], tiny.scene)
+    gripdem.write_trajectory(tmp_path / "short.h5", short)
     sweep = tmp_path / "sweep"
     command = sweep_command(
         sweep,
-        f"data.path={tiny_pbc_path}",
-        "split.horizon=5,60",
+        f"data.path=null,{tmp_path / 'short.h5'}",
         "hydra/launcher=parallel",
         "hydra.launcher.n_jobs=2",
     )
@@ -76,7 +80,7 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     assert "launching 2 job(s), 2 at a time with 1 torch thread(s) each" in proc.stdout
     assert f"compare the runs: tensorboard --logdir {tmp_path}" in proc.stdout
     # each job's folder (and TensorBoard run) is named by the swept value
-    ok, failed = sweep / "split.horizon=5", sweep / "split.horizon=60"
+    ok, failed = sweep / "data.path=null", sweep / "data.path=short.h5"
     metrics = json.loads((ok / "metrics.json").read_text())
     assert metrics["hparams"]["split"] == "10-5"
     assert list(ok.glob("events.out.tfevents*"))
@@ -85,22 +89,24 @@ def test_jobs_run_side_by_side_and_a_failed_job_is_named(
     # set hydra.mode=MULTIRUN would otherwise start a study of its own)
     assert "mode: RUN" in (ok / ".hydra" / "hydra.yaml").read_text()
     error = (failed / "error.txt").read_text()
-    assert "split 10-60 needs 71 frames" in error and not (failed / "metrics.json").exists()
+    assert "split 10-5 needs 16 frames" in error and not (failed / "metrics.json").exists()
     summary = (sweep / "summary.md").read_text()
     assert "| ok |" in summary and f"failed: {error.strip()}" in summary
     # the console's summary: the short table within 100 columns, then where the full one is
     out = proc.stdout.splitlines()
     header = ["job", "status", "÷", "CV", "÷", "AR", "overlap", "%", "min"]
     console = out[next(i for i, line in enumerate(out) if line.split() == header) :]
-    assert console[1].startswith("split.horizon=5 ") and "failed: " in console[2]
+    assert console[1].startswith("data.path=null ") and "failed: " in console[2]
     assert max(len(line) for line in console[:3]) <= 100
     assert f"the full tables: {sweep / 'summary.md'} and {sweep / 'summary.csv'}" in proc.stdout
     imported = [line.rsplit("|", 1)[-1].strip() for line in proc.stderr.splitlines()]
     assert "hydra" in imported and not [m for m in imported if m.startswith("lightning")]
-    assert "torch" not in imported  # the jobs' dataset names are computed without it
+    assert "gripdem.dem.output" in imported  # it names the built-in job's dataset ...
+    assert "torch" not in imported  # ... without torch
+    assert "numba" not in imported  # ... and without the DEM (imported where it generates)
     lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
-    assert len(lines) == 1 and "job split.horizon=60 (" in lines[0]
-    assert "split.horizon=5 " not in lines[0]  # only the failed job is named
+    assert len(lines) == 1 and "job data.path=short.h5 (" in lines[0]
+    assert "data.path=null " not in lines[0]  # only the failed job is named
 
 
 def _wait_for(predicate, timeout: float) -> bool:

@@ -3,10 +3,10 @@
 (:func:`gripdem.evaluation.sweep_summary.write_summary`).
 
 Columns (a study's trials: the state, the validation RMSE over constant velocity's, steps and
-minutes): the swept keys (values cut to fit), the status, the test RMSE over constant velocity's
-(``÷ CV``) and over the linear AR filter's (``÷ AR``), the overlapping fraction of particles at
-the last predicted frame (``overlap %``) and the job's wall minutes; grouped over seeds, the
-mean ± std of each.
+minutes): the swept keys (values shown as the run names show them, :func:`shown_value`, cut to
+fit), the status, the test RMSE over constant velocity's (``÷ CV``) and over the linear AR
+filter's (``÷ AR``), the overlapping fraction of particles at the last predicted frame
+(``overlap %``) and the job's wall minutes; grouped over seeds, the mean ± std of each.
 """
 
 from __future__ import annotations

@@ -35,8 +35,8 @@ from gripdem.data.graph import DEFAULT_ALPHA
 from gripdem.data.normalizer import Normalizer
 from gripdem.data.protocols import (
     PARTS,
-    RENAMED_PLAN_OPTIONS,
     WindowPlan,
+    current_plan_names,
     plan_arguments,
     plan_windows,
 )
@@ -165,11 +165,7 @@ class TrajectoryDataModule(L.LightningDataModule):
         ``split`` may also be a string ``"h-f"``). ``overrides`` win (e.g. ``path=`` resolved
         by the runner)."""
         data, split = _plain(data), _plain(split)
-        kwargs = {k: v for k, v in data.items() if not str(k).startswith("_")}
-        for old, new in RENAMED_PLAN_OPTIONS.items():  # a run's config saved before the rename
-            value = kwargs.pop(old, None)
-            if value is not None:
-                kwargs[new] = value
+        kwargs = current_plan_names({k: v for k, v in data.items() if not str(k).startswith("_")})
         kwargs.update(overrides)
         if isinstance(split, Mapping):
             split = {"history": split.get("history"), "horizon": split.get("horizon")}

@@ -154,9 +154,8 @@ def plan_arguments(
     train_stride: int = 1,
     eval_stride: int | None = None,
 ) -> dict[str, Any]:
-    """The keyword arguments of :func:`plan_windows` from the data options of the same names
-    (``conf/data/default.yaml``): one place for the DataModule and for the runner's check of a
-    user's file before Lightning is imported
+    """:func:`plan_windows`' keyword arguments from the data options of the same names: one
+    place for the DataModule and the runner's check of a user's file before Lightning
     (:func:`gripdem.runner.config_checks.check_windows_fit_the_file`)."""
     return dict(
         protocol=current_protocol(protocol),
@@ -170,17 +169,21 @@ def plan_arguments(
     )
 
 
+def current_plan_names(options: Mapping[str, Any]) -> dict[str, Any]:
+    """``options`` with the plan's former names (:data:`RENAMED_PLAN_OPTIONS`) renamed."""
+    options = dict(options)
+    for old, new in RENAMED_PLAN_OPTIONS.items():
+        value = options.pop(old, None)
+        if value is not None:
+            options[new] = value
+    return options
+
+
 #: the data options that :func:`plan_arguments` reads
 PLAN_OPTIONS = (
-    "protocol",
-    "fractions",
-    "sims",
-    "simulations",
-    "in_sample_windows",
-    "history_len",
-    "train_stride",
-    "eval_stride",
-)
+    "protocol", "fractions", "sims", "simulations", "in_sample_windows", "history_len",
+    "train_stride", "eval_stride",
+)  # fmt: skip
 
 
 def plan_windows(

@@ -9,7 +9,12 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from gripdem.data.protocols import PLAN_OPTIONS, RENAMED_PLAN_OPTIONS, plan_arguments, plan_windows
+from gripdem.data.protocols import (
+    PLAN_OPTIONS,
+    current_plan_names,
+    plan_arguments,
+    plan_windows,
+)
 from gripdem.data.windows import Split, resolve_rollout_links
 from gripdem.runner.run_names import hydra_choices
 
@@ -73,9 +78,6 @@ def check_windows_fit_the_file(path: Path, data: dict, split: Split) -> None:
         return
     if len(shape) != 4:
         return
-    data = dict(data)
-    for old, new in RENAMED_PLAN_OPTIONS.items():  # a run's config saved before the rename
-        if data.get(old) is not None:
-            data[new] = data[old]
+    data = current_plan_names(data)  # a run's config saved before the rename
     options = {key: data[key] for key in PLAN_OPTIONS if data.get(key) is not None}
     plan_windows(int(shape[0]), int(shape[1]), split, **plan_arguments(**options))
